@@ -1,0 +1,119 @@
+"""Refinement study: numerical error of the critical height versus resolution level.
+
+For every report preset (and the second series' extreme mu values) the critical
+height is computed at levels 0, 0.5, ..., 4 (each level doubles the cells per medium,
+halves the first cell and halves the time step, see skidmc.model) with a root-finder
+tolerance far below the discretisation error. The converged value is estimated by
+Richardson extrapolation of the two finest levels (second order: ratio 4 per level),
+and the error of each level is measured against it. The observed order is reported,
+and the calibration constant ``skidmc.solver.ERROR_LEVEL0`` is checked against the
+worst case.
+
+Writes results/validation/refinement.{csv,md,png}. Run: ``python scripts/refinement_study.py``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from skidmc.model import resolution_for_level  # noqa: E402
+from skidmc.scene import make_scene  # noqa: E402
+from skidmc.solver import ERROR_LEVEL0, critical_height, level_for_rtol  # noqa: E402
+
+OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
+LEVELS = [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0]
+CASES = {
+    "paper-quartz": {},
+    "paper-alumina-smooth": {},
+    "paper-alumina-rough": {},
+    "paper-gold": {},
+    "paper2-quartz mu=0.056": {"preset": "paper2-quartz", "mu": 0.056},
+    "paper2-quartz mu=0.243": {"preset": "paper2-quartz", "mu": 0.243},
+}
+
+
+def main():
+    OUT.mkdir(parents=True, exist_ok=True)
+    table = {}
+    for case, spec in CASES.items():
+        spec = dict(spec)
+        scene = make_scene(preset=spec.pop("preset", case), **spec)
+        heights, costs = [], []
+        for level in LEVELS:
+            res = critical_height(scene, level=level, rtol=1e-7)
+            heights.append(res.critical_height)
+            costs.append(res.wall_time / max(res.evaluations, 1))
+            print(f"{case:28s} level {level:3.1f} H = {res.critical_height:.8g} m "
+                  f"({res.evaluations} sims, {1e3 * costs[-1]:.1f} ms/sim)", flush=True)
+        h = np.array(heights)
+        # Richardson on the two finest levels, one level apart (ratio 4 for second order).
+        converged = h[-1] + (h[-1] - h[-3]) / 3.0
+        table[case] = (h, converged, np.array(costs))
+
+    with open(OUT / "refinement.csv", "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["case", "level", "cells_per_medium", "tol_temperature_K",
+                         "critical_height_m", "rel_error", "ms_per_simulation"])
+        for case, (h, conv, costs) in table.items():
+            for level, hh, cc in zip(LEVELS, h, costs):
+                res = resolution_for_level(level)
+                writer.writerow([case, level, res.cells_per_medium, res.tol_temperature,
+                                 f"{hh:.10g}", f"{hh / conv - 1:.3e}", f"{1e3 * cc:.3f}"])
+
+    lines = [
+        "# Refinement study: error of the critical height vs resolution level",
+        "",
+        "`python scripts/refinement_study.py`. Converged value: Richardson extrapolation of levels "
+        f"{LEVELS[-3]:g} and {LEVELS[-1]:g} (second order). Relative error of each level against it.",
+        "",
+        "| case | converged H [m] | converged H [ft] | "
+        + " | ".join(f"L{lv:g}" for lv in LEVELS) + " | observed order (L1->L3) |",
+        "|---|---|---|" + "---|" * len(LEVELS) + "---|",
+    ]
+    worst = np.zeros(len(LEVELS))
+    for case, (h, conv, _) in table.items():
+        err = np.abs(h / conv - 1)
+        worst = np.maximum(worst, err)
+        i1, i3 = LEVELS.index(1.0), LEVELS.index(3.0)
+        order = math.log(max(err[i1], 1e-16) / max(err[i3], 1e-16)) / math.log(4.0)
+        lines.append(f"| {case} | {conv:.6g} | {conv / 0.3048:.5g} | "
+                     + " | ".join(f"{e:.1e}" for e in err) + f" | {order:.2f} |")
+    model_err = [ERROR_LEVEL0 * 4.0 ** (-lv) for lv in LEVELS]
+    lines += [
+        "| worst case | | | " + " | ".join(f"{e:.1e}" for e in worst) + " | |",
+        "| solver's error model ERROR_LEVEL0 * 4^-L | | | "
+        + " | ".join(f"{e:.1e}" for e in model_err) + " | 2 |",
+        "",
+        "The solver chooses the level from rtol so that the error model is below rtol/2: "
+        + ", ".join(f"rtol {r:g} -> level {level_for_rtol(r):g}" for r in (1e-2, 3e-3, 1e-3, 1e-4))
+        + ".",
+    ]
+    (OUT / "refinement.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for case, (h, conv, _) in table.items():
+        cells = [resolution_for_level(lv).cells_per_medium for lv in LEVELS]
+        err = np.abs(h / conv - 1)
+        ax.loglog(cells[:-1], err[:-1], "o-", label=case)
+    cells = np.array([resolution_for_level(lv).cells_per_medium for lv in LEVELS])
+    ax.loglog(cells, model_err, "k--", label="error model (2nd order)")
+    ax.set_xlabel("cells per medium (time step halves with each doubling)")
+    ax.set_ylabel("relative error of the critical height [1]")
+    ax.set_title("Refinement of the critical height")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(OUT / "refinement.png", dpi=150)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,292 @@
+"""Command-line front end: ``skidmc presets``, ``skidmc height``, ``skidmc run``.
+
+Every input error (:class:`skidmc.errors.SkidmcError`) ends the program with one line on stderr
+and exit status 2; anything else is a bug and keeps its traceback.
+
+Examples
+--------
+::
+
+    skidmc presets
+    skidmc height --preset paper-quartz
+    skidmc height --preset paper2-quartz --set mu=0.056 --set flow_stress="34400 psi" --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+
+from skidmc import __version__
+from skidmc.errors import SceneError, SkidmcError
+
+__all__ = ["build_parser", "main"]
+
+# --- small helpers -------------------------------------------------------------------------------
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
+    return value
+
+
+def _parse_sets(items: Sequence[str]) -> dict[str, str]:
+    """``["mu=0.1", "flow_stress=34400 psi"]`` -> ``{"mu": "0.1", ...}``; a later KEY wins."""
+    overrides: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        key, value = key.strip(), value.strip()
+        if not sep or not key:
+            raise SceneError(
+                "--set", item, "expected KEY=VALUE, e.g. --set flow_stress='34400 psi'"
+            )
+        if len(value) >= 2 and value[0] == value[-1] and value[0] in "'\"":
+            value = value[1:-1]  # quotes that reached us (e.g. from a script that quoted twice)
+        overrides[key] = value
+    return overrides
+
+
+def _table(rows: Sequence[Sequence[str]], indent: str = "") -> str:
+    """Left-aligned columns separated by two spaces."""
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return "\n".join(
+        indent + "  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows
+    )
+
+
+def _json_default(obj):
+    if hasattr(obj, "item"):  # numpy scalars
+        return obj.item()
+    if isinstance(obj, (tuple, set, frozenset)):
+        return list(obj)
+    return str(obj)
+
+
+def _unit_label(unit: str) -> str:
+    return "" if unit in ("1", "-") else unit
+
+
+def _scene_inputs(scene) -> dict[str, dict]:
+    from skidmc.scene import SI_UNITS
+
+    return {key: {"value": value, "units": SI_UNITS[key]} for key, value in scene.as_dict().items()}
+
+
+# --- skidmc presets ------------------------------------------------------------------------------
+
+
+def _cmd_presets(args: argparse.Namespace) -> int:
+    from skidmc.presets import PRESETS, get_preset
+    from skidmc.scene import SI_UNITS
+
+    names = [args.name] if args.name else list(PRESETS)
+    scenes = {name: get_preset(name) for name in names}  # raises SceneError on an unknown name
+    if args.json:
+        out = {
+            name: {
+                "source": PRESETS[name]["source"],
+                "notes": PRESETS[name]["notes"],
+                "values": PRESETS[name]["values"],
+                "si": _scene_inputs(scene),
+            }
+            for name, scene in scenes.items()
+        }
+        print(json.dumps(out, indent=2))
+        return 0
+    blocks = []
+    for name, scene in scenes.items():
+        written = PRESETS[name]["values"]
+        rows = [("key", "as given", "SI value", "unit")]
+        for key, value in scene.as_dict().items():
+            shown = value if isinstance(value, str) else f"{value:.6g}"
+            rows.append((key, written[key], shown, _unit_label(SI_UNITS[key])))
+        blocks.append(
+            f"{name}\n  source: {PRESETS[name]['source']}\n  notes:  {PRESETS[name]['notes']}\n"
+            + _table(rows, indent="  ")
+        )
+    print("\n\n".join(blocks))
+    return 0
+
+
+# --- skidmc height -------------------------------------------------------------------------------
+
+
+def _cmd_height(args: argparse.Namespace) -> int:
+    from skidmc.scene import make_scene
+    from skidmc.units import from_si, to_si
+
+    overrides = _parse_sets(args.set)
+    scene = make_scene(overrides, preset=args.preset)
+    # Search bounds are passed only when given, so that the solver's own defaults apply otherwise.
+    bounds: dict[str, float] = {}
+    for name, option in (("h_min", "--h-min"), ("h_max", "--h-max")):
+        text = getattr(args, name)
+        if text is not None:
+            bounds[name] = to_si(option, text, "m")
+            if not bounds[name] > 0:
+                raise SceneError(option, text, "must be > 0")
+    if len(bounds) == 2 and not bounds["h_min"] < bounds["h_max"]:
+        raise SceneError("--h-max", args.h_max, f"must be above --h-min ({args.h_min})")
+
+    try:
+        from skidmc.solver import critical_height
+    except ModuleNotFoundError as exc:
+        if exc.name != "skidmc.solver":
+            raise
+        print("skidmc: error: the solver (skidmc.solver) is not installed", file=sys.stderr)
+        return 1
+    result = critical_height(scene, rtol=args.rtol, tier=args.tier, **bounds)
+
+    height_m = float(result.critical_height)
+    report = {
+        "critical_height_m": height_m,
+        "critical_height_ft": from_si(height_m, "m", "ft"),
+        "censored": result.censored,
+        "evaluations": int(result.evaluations),
+        "flags": list(result.flags),
+        "wall_time_s": float(result.wall_time),
+        "rtol": args.rtol,
+        "tier": args.tier,
+        **{f"{name}_m": value for name, value in bounds.items()},
+        "preset": args.preset,
+        "overrides": overrides,
+        "scene": _scene_inputs(scene),
+    }
+    for key, value in result.to_dict().items():  # the solver's diagnostics (error estimate, ...)
+        report.setdefault(key, value)
+    if args.json:
+        print(json.dumps(report, indent=2, default=_json_default))
+        return 0
+
+    bound = {"above": "> ", "below": "< "}.get(result.censored, "")
+    meaning = {
+        "above": "censored: no event up to the upper search bound",
+        "below": "censored: event already at the lower search bound",
+    }.get(result.censored, "no")
+    height_ft = report["critical_height_ft"]
+    rows = [
+        ("critical height", f"{bound}{height_m:.4g} m", f"({bound}{height_ft:.4g} ft)"),
+        ("censored", meaning, ""),
+        ("evaluations", str(report["evaluations"]), ""),
+        ("flags", ", ".join(report["flags"]) or "-", ""),
+        ("wall time", f"{report['wall_time_s']:.3g} s", ""),
+        ("rtol, tier", f"{args.rtol:g}, {args.tier}", ""),
+        ("preset", args.preset, ""),
+    ]
+    rows += [("set", f"{key} = {value}", "") for key, value in overrides.items()]
+    print(_table(rows))
+    return 0
+
+
+# --- skidmc run (ensemble runner; owned by the sampling/runner engineer) -------------------------
+# The options are registered here; the work is done by skidmc.runner.main_run(args), imported only
+# when the subcommand is used so that `skidmc presets` and `skidmc height` do not load the runner.
+
+
+def _add_run_parser(subparsers) -> None:
+    run = subparsers.add_parser(
+        "run", help="run a study (TOML) over an ensemble of scenes",
+        description="Run the study described in STUDY.toml and store its results.",
+    )
+    run.add_argument("study", help="study file (TOML)")
+    run.add_argument("--out", help="output file or folder (default: from the study file)")
+    run.add_argument("--n", type=int, help="number of samples (default: from the study file)")
+    run.add_argument("--workers", type=int, help="number of worker processes")
+    run.add_argument("--scheduler", help="where to run: local processes or a dask scheduler")
+    run.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    run.add_argument("--quiet", action="store_true", help="no progress output")
+    run.set_defaults(func=_cmd_run)
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    try:
+        from skidmc.runner import main_run
+    except ModuleNotFoundError as exc:
+        if exc.name != "skidmc.runner":
+            raise
+        print("skidmc: error: the ensemble runner (skidmc.runner) is not installed",
+              file=sys.stderr)
+        return 1
+    return int(main_run(args) or 0)
+
+
+# --- parser and entry point ----------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``skidmc`` argument parser (subcommands ``presets``, ``height``, ``run``)."""
+    parser = argparse.ArgumentParser(
+        prog="skidmc", description="Oblique-impact (skid test) initiation model of HE billets."
+    )
+    parser.add_argument("--version", action="version", version=f"skidmc {__version__}")
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    presets = subparsers.add_parser(
+        "presets", help="list the presets (the report's scenes) with their values and units"
+    )
+    presets.add_argument("name", nargs="?", help="show only this preset")
+    presets.add_argument("--json", action="store_true", help="print JSON")
+    presets.set_defaults(func=_cmd_presets)
+
+    height = subparsers.add_parser(
+        "height", help="critical drop height of one scene",
+        description="Critical drop height of a scene: a preset with optional overrides.",
+    )
+    height.add_argument("--preset", required=True, metavar="NAME", help="preset to start from")
+    height.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE",
+        help="override a scene input; VALUE is SI or has units, e.g. flow_stress='34400 psi' "
+        "(repeatable)",
+    )
+    height.add_argument(
+        "--rtol", type=_positive_float, default=1e-3,
+        help="relative tolerance of the height search (default: %(default)g)",
+    )
+    height.add_argument(
+        "--tier", choices=("full", "fast"), default="full", help="model tier (default: full)"
+    )
+    height.add_argument(
+        "--h-min", metavar="H", help="lower search bound [m], or with units ('1 ft')"
+    )
+    height.add_argument("--h-max", metavar="H", help="upper search bound [m], or with units")
+    height.add_argument("--json", action="store_true", help="print JSON")
+    height.set_defaults(func=_cmd_height)
+
+    _add_run_parser(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``skidmc`` console script.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments without the program name; ``sys.argv[1:]`` when None.
+
+    Returns
+    -------
+    int
+        Exit status: 0 success, 1 a missing component, 2 invalid input (one line on stderr).
+        Usage errors exit with status 2 through :mod:`argparse` (``SystemExit``).
+    """
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except SkidmcError as err:
+        print(f"skidmc: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("skidmc: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,199 @@
+"""Mechanics of the oblique impact of a plastic hemisphere on a rigid plane.
+
+Pure functions of SI floats (or numpy arrays), one per equation of the report
+(Randolph, Hatler & Popolato; LASL skid-test report, section II.A-D). Symbols:
+
+==========  ===========================================================  ==========
+symbol      meaning                                                      unit
+==========  ===========================================================  ==========
+sigma       plastic flow stress of the billet (normal contact pressure)  [Pa]
+W           billet mass                                                  [kg]
+D           hemisphere diameter                                          [m]
+phi         complement of the approach angle (pendulum) or the target    [deg]
+            angle (vertical drop)
+psi         billet tilt: 0 for the pendulum, = phi for a vertical drop   [deg]
+mu          apparent coefficient of sliding friction                     [1]
+H           vertical drop height                                         [m]
+==========  ===========================================================  ==========
+
+Rebound forces are neglected (plastic impact, report II.B), so every quantity
+below holds for ``0 <= t <= t_c``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Standard gravity [m/s^2] (the report's g in the drop velocity V0 = sqrt(2 g H)).
+STANDARD_GRAVITY = 9.80665
+
+#: Moment of inertia of a solid hemisphere about its centre of gravity, per unit
+#: mass and squared diameter: I_cg / W = (83/320) R^2 = 0.0648 D^2 (report II.C).
+HEMISPHERE_INERTIA_FACTOR = 83.0 / 1280.0
+
+#: Distance of a hemisphere's centre of gravity from its flat face, per radius (3/8).
+CG_OFFSET_FACTOR = 0.375
+
+
+def impact_speed(height):
+    """Impact speed V0 = sqrt(2 g H) after a vertical drop [m/s].
+
+    Parameters
+    ----------
+    height : float or array
+        Vertical drop height H [m].
+    """
+    return np.sqrt(2.0 * STANDARD_GRAVITY * np.asarray(height, dtype=float))
+
+
+def normal_impact_speed(height, angle):
+    """Normal component of the impact velocity, V_n0 = sqrt(2 g H) cos(phi) [m/s] (II.B)."""
+    return impact_speed(height) * np.cos(np.radians(angle))
+
+
+def angular_frequency(flow_stress, billet_mass, billet_diameter):
+    """Frequency of the constant-stress plastic impact, omega = sqrt(pi sigma D / W) [rad/s].
+
+    From W X'' = -sigma pi D X (report Eq. 2 with F = sigma A, A = pi D X).
+    """
+    return np.sqrt(np.pi * flow_stress * billet_diameter / billet_mass)
+
+
+def contact_time(flow_stress, billet_mass, billet_diameter):
+    """Contact time t_c = pi / (2 omega) [s], independent of the impact speed (II.B)."""
+    return 0.5 * np.pi / angular_frequency(flow_stress, billet_mass, billet_diameter)
+
+
+def normal_deformation(t, height, angle, flow_stress, billet_mass, billet_diameter):
+    """Normal deformation X(t) = (V_n0 / omega) sin(omega t) [m] (II.B)."""
+    omega = angular_frequency(flow_stress, billet_mass, billet_diameter)
+    return normal_impact_speed(height, angle) / omega * np.sin(omega * np.asarray(t, dtype=float))
+
+
+def contact_area(t, height, angle, flow_stress, billet_mass, billet_diameter):
+    """Contact area A(t) = pi D X(t) [m^2] (II.B, a^2 = D X)."""
+    x = normal_deformation(t, height, angle, flow_stress, billet_mass, billet_diameter)
+    return np.pi * billet_diameter * x
+
+
+def max_contact_diameter(height, angle, flow_stress, billet_mass, billet_diameter):
+    """Maximum contact diameter d_c [m], report Eq. (5).
+
+    d_c^4 = 32 D W g cos^2(phi) H / (pi sigma), i.e. d_c = K H^(1/4) (Eq. 6).
+    """
+    cos_phi = np.cos(np.radians(angle))
+    dc4 = (
+        32.0 * billet_diameter * billet_mass * STANDARD_GRAVITY * cos_phi**2
+        * np.asarray(height, dtype=float) / (np.pi * flow_stress)
+    )
+    return dc4**0.25
+
+
+def flow_stress_from_contact_diameter(contact_diameter, height, angle, billet_mass,
+                                      billet_diameter):
+    """Flow stress sigma [Pa] that explains a measured maximum contact diameter, Eq. (5) inverted.
+
+    This is how the report measured sigma (imprint on carbon paper, Fig. 3).
+    """
+    cos_phi = np.cos(np.radians(angle))
+    return (32.0 * billet_diameter * billet_mass * STANDARD_GRAVITY * cos_phi**2 * height
+            / (np.pi * np.asarray(contact_diameter, dtype=float) ** 4))
+
+
+def moment_arm_terms(tilt):
+    """Trigonometric moment-arm terms a' = 1 - 0.375 cos(psi), b' = 0.375 sin(psi) [1] (II.C).
+
+    a' R is the arm of the tangential force about the centre of gravity and b' R
+    that of the normal force. For the pendulum (psi = 0), b' = 0: the normal force
+    passes through the centre of gravity and only friction spins the billet.
+    """
+    psi = np.radians(tilt)
+    return 1.0 - CG_OFFSET_FACTOR * np.cos(psi), CG_OFFSET_FACTOR * np.sin(psi)
+
+
+def spin_after_rebound(mu, height, angle, tilt, billet_diameter):
+    """Angular velocity after rebound theta_dot_c [rad/s], report Eq. (8).
+
+    theta_dot_c = (a' mu + b') D V_n0 W / (2 I_cg) = (a' mu + b') V_n0 / (2 * 0.0648 D),
+    the report's "7.72 (a' mu + b') V_n0 / D".
+    """
+    a_prime, b_prime = moment_arm_terms(tilt)
+    vn0 = normal_impact_speed(height, angle)
+    return (a_prime * mu + b_prime) * vn0 / (2.0 * HEMISPHERE_INERTIA_FACTOR * billet_diameter)
+
+
+def friction_from_spin(spin_rate, height, angle, tilt, billet_diameter):
+    """Apparent friction coefficient mu [1] from the spin after rebound, report Eq. (9).
+
+    mu = (1/a') (2 * 0.0648 D theta_dot_c / V_n0 - b'): the report's "0.13 D theta_dot_c / V_n0".
+    Inverse of :func:`spin_after_rebound`.
+    """
+    a_prime, b_prime = moment_arm_terms(tilt)
+    vn0 = normal_impact_speed(height, angle)
+    return (2.0 * HEMISPHERE_INERTIA_FACTOR * billet_diameter * spin_rate / vn0 - b_prime) / a_prime
+
+
+def sliding_deceleration_coefficient(mu, tilt):
+    """Coefficient C of Eq. (10): V_r/V0 = sin(phi) - C cos(phi) (1 - cos(omega t)) [1].
+
+    C = mu + (a' mu + b') D W X''' / (2 I_cg), where X''' = sqrt(X'^2 + X''^2)
+    = (D/2) sqrt(a'^2 + b'^2) is the distance from the centre of gravity to the
+    contact centre (the report's "X''' = [(X'')^2 + (X''')^2]^(1/2)" is a typo, see
+    physics notes sec. 1). With I_cg = 0.0648 D^2 W the diameter and mass cancel.
+    The first term is the translational deceleration by friction, the second the
+    contact point's velocity due to the spin friction (and, for psi > 0, the normal
+    force) imparts.
+    """
+    a_prime, b_prime = moment_arm_terms(tilt)
+    arm = 0.5 * np.hypot(a_prime, b_prime)  # X''' / D
+    return mu + (a_prime * mu + b_prime) * arm / (2.0 * HEMISPHERE_INERTIA_FACTOR)
+
+
+def sliding_velocity(t, height, mu, angle, tilt, flow_stress, billet_mass, billet_diameter):
+    """Sliding velocity of the contact on the target V_r(t) [m/s], report Eq. (10).
+
+    Not clipped: a negative value means the contact has stopped sliding earlier
+    (see :func:`stop_time`).
+    """
+    omega = angular_frequency(flow_stress, billet_mass, billet_diameter)
+    phi = np.radians(angle)
+    c = sliding_deceleration_coefficient(mu, tilt)
+    wt = omega * np.asarray(t, dtype=float)
+    return impact_speed(height) * (np.sin(phi) - c * np.cos(phi) * (1.0 - np.cos(wt)))
+
+
+def stop_time(mu, angle, tilt, flow_stress, billet_mass, billet_diameter):
+    """Time at which the contact stops sliding [s]; ``inf`` if it slides until rebound.
+
+    V_r = 0 at cos(omega t_s) = 1 - tan(phi)/C, which lies in the contact phase
+    (omega t_s <= pi/2) only when C >= tan(phi). Independent of the drop height.
+    """
+    omega = angular_frequency(flow_stress, billet_mass, billet_diameter)
+    c = sliding_deceleration_coefficient(mu, tilt)
+    tan_phi = np.tan(np.radians(angle))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos_wt = 1.0 - tan_phi / c
+        ts = np.where(c >= tan_phi, np.arccos(np.clip(cos_wt, -1.0, 1.0)) / omega, np.inf)
+    return ts[()] if np.ndim(ts) == 0 else ts
+
+
+def exit_time(mu, angle, tilt, flow_stress, billet_mass, billet_diameter):
+    """End of frictional heating [s] and its cause: ``(t_exit, "rebound" | "stops_sliding")``.
+
+    The report's two non-event exits: "hemisphere rebounds" at t_c and "hemisphere
+    stops sliding" at t_s < t_c. Both are independent of the drop height.
+    """
+    tc = float(contact_time(flow_stress, billet_mass, billet_diameter))
+    ts = float(stop_time(mu, angle, tilt, flow_stress, billet_mass, billet_diameter))
+    if ts < tc:
+        return ts, "stops_sliding"
+    return tc, "rebound"
+
+
+def frictional_flux(t, height, mu, angle, tilt, flow_stress, billet_mass, billet_diameter):
+    """Frictional heat flux at the interface q(t) = mu sigma V_r(t) [W/m^2], report Eq. (1).
+
+    In SI the report's mechanical-to-thermal factor J is 1. Zero once sliding stops.
+    """
+    vr = sliding_velocity(t, height, mu, angle, tilt, flow_stress, billet_mass, billet_diameter)
+    return mu * flow_stress * np.maximum(vr, 0.0)

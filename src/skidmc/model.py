@@ -1,0 +1,286 @@
+"""Model inference: what one scene needs, turned into the kernels' SI arrays.
+
+A :class:`SkidModel` is built once per scene (it does not depend on the drop
+height: the contact time and the exit time are height-independent, report II.B-D)
+and is then simulated at as many heights as the critical-height search needs.
+
+Inference follows the scene, so a scene that needs nothing more gets nothing more:
+
+* the normal-force moment (b' of Eq. 10) only when the billet is tilted (psi > 0,
+  vertical drops); for the pendulum (psi = 0) only friction spins the billet;
+* melting only when the HE has a heat of fusion, melting is switched on, and the
+  melting point lies below the runaway temperature (otherwise no cell can melt
+  before the event is declared, so the enthalpy plateau can never be reached);
+* each medium's mesh depth from its own diffusion length over the simulated time,
+  its first cell from the estimated thickness of the reaction zone at ignition;
+* a frictionless scene (mu = 0) generates no heat and needs no simulation at all.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from skidmc import mechanics
+from skidmc.thermal import runaway_temperature
+
+#: Integration horizon, in exit times. Beyond the exit the flux is extended (see
+#: :attr:`SkidModel.extension_flux_factor`) only to give the critical-height search
+#: a continuous margin; the go/no-go verdict only looks at events before t_exit.
+HORIZON_EXIT_TIMES = 4.0
+
+#: Depth of each medium's mesh in diffusion lengths sqrt(alpha t_end). With t_end =
+#: 4 t_exit this is 8 sqrt(alpha t_exit): at the exit time, which decides go/no-go,
+#: the temperature rise there is ~ erfc(4) = 2e-8 of the surface rise, so the
+#: insulated far end is invisible at the interface. (It is felt late in the flux
+#: extension, which only shapes the search margin.) Depth 4 rather than 6 puts more
+#: cells near the interface: the refinement study found it the more accurate of the two.
+DEPTH_DIFFUSION_LENGTHS = 4.0
+
+#: Default runaway rule: the event is declared when the hottest cell's adiabatic
+#: induction time falls below this fraction of the exit time (see skidmc.thermal).
+#: tests/test_solver.py shows that moving it by decades moves the critical height
+#: by far less than rtol.
+DEFAULT_RUNAWAY_FRACTION = 1e-5
+
+
+@dataclass(frozen=True)
+class Resolution:
+    """Numerical resolution of one simulation.
+
+    Attributes
+    ----------
+    cells_per_medium : int
+        Number of finite-volume cells in each medium [1].
+    first_cell_fraction : float
+        Width of the first HE cell, as a fraction of the estimated reaction-zone
+        thickness at ignition [1].
+    tol_temperature : float
+        Local error tolerance of the BDF2 step controller [K].
+    melt_width : float
+        Width w [K] of the smoothed melting step (see skidmc.thermal._he_enthalpy).
+    """
+
+    cells_per_medium: int
+    first_cell_fraction: float
+    tol_temperature: float
+    melt_width: float
+
+
+#: Base resolution (level 0). Each level doubles the cells, halves the first cell and
+#: divides the step tolerance by 8 (BDF2: step ~ tol^(1/3), so the time step halves),
+#: so that both spatial and temporal errors fall ~4x per level (second order).
+BASE_RESOLUTION = Resolution(cells_per_medium=24, first_cell_fraction=0.5, tol_temperature=0.5,
+                             melt_width=2.0)
+
+
+def resolution_for_level(level):
+    """Resolution of refinement level ``level`` (float allowed) [see :data:`BASE_RESOLUTION`]."""
+    scale = 2.0 ** level
+    return Resolution(
+        cells_per_medium=max(8, int(round(BASE_RESOLUTION.cells_per_medium * scale))),
+        first_cell_fraction=BASE_RESOLUTION.first_cell_fraction / scale,
+        tol_temperature=BASE_RESOLUTION.tol_temperature / scale**3,
+        melt_width=BASE_RESOLUTION.melt_width / scale,
+    )
+
+
+def geometric_widths(first_width, depth, n_cells):
+    """Cell widths [m] of a geometric mesh: ``n_cells`` cells, first ``first_width``, total ``depth``.
+
+    The growth ratio r solves first_width (r^n - 1)/(r - 1) = depth; if even a uniform
+    mesh of ``first_width`` cells is deeper than ``depth``, the mesh is uniform.
+    """
+    if first_width * n_cells >= depth:
+        return np.full(n_cells, first_width)
+    target = depth / first_width
+    lo, hi = 1.0 + 1e-12, 2.0
+    while (hi**n_cells - 1.0) / (hi - 1.0) < target:
+        hi *= 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if (mid**n_cells - 1.0) / (mid - 1.0) < target:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-14 * mid:
+            break
+    r = 0.5 * (lo + hi)
+    return first_width * r ** np.arange(n_cells)
+
+
+def estimated_reaction_zone(model_time, he_diffusivity, initial_temperature, prefactor,
+                            activation_temperature):
+    """Rough thickness of the reacting layer at ignition [m], used only to size the mesh.
+
+    The surface ignites near the temperature T_i at which the reaction time
+    1/(Z exp(-T_a/T_i)) is ~1e-3 of the contact time; the layer in which the rate is
+    within a factor e of the surface rate is ~ sqrt(alpha t) T_i^2 / (T_a (T_i - T0))
+    (the thermal layer times the temperature fraction within T_i^2/T_a of the top).
+    """
+    thermal_layer = math.sqrt(he_diffusivity * model_time)
+    if prefactor <= 0.0:
+        return thermal_layer
+    log_arg = math.log(max(prefactor * model_time * 1e-3, math.e))
+    t_ign = activation_temperature / log_arg
+    rise = max(t_ign - initial_temperature, 1.0)
+    zone = thermal_layer * t_ign**2 / (activation_temperature * rise)
+    return min(zone, thermal_layer)
+
+
+@dataclass
+class SkidModel:
+    """Everything the kernels need for one scene, independent of the drop height.
+
+    Built by :func:`build_model`. Heights enter only through the flux amplitude
+    q0 = mu sigma sqrt(2 g H) (Eqs. 1, 10).
+    """
+
+    # Mechanics (Eqs. 1-10)
+    omega: float                  # [rad/s]
+    contact_time: float           # t_c [s]
+    exit_time: float              # t_exit [s]
+    exit_kind: str                # "rebound" | "stops_sliding"
+    slide_s: float                # sin(phi) [1]
+    slide_c: float                # C cos(phi) [1]
+    flux_per_root_height: float   # mu sigma sqrt(2 g) [W/m^2 / m^0.5]
+    extension_flux_factor: float  # q_ext / q0 after t_exit [1]
+    end_time: float               # t_end [s]
+    # Thermal
+    width: np.ndarray             # [m]
+    rho_c: np.ndarray             # [J/(m^3 K)]
+    face_conductance: np.ndarray  # [W/(m^2 K)]
+    n_target: int
+    q_share_he: float             # [1]
+    he_density: float             # [kg/m^3]
+    latent_heat: float            # [J/kg] (0 when melting is not modelled)
+    melting_point: float          # [K]
+    prefactor: float              # [1/s]
+    activation_temperature: float  # [K]
+    heat_of_reaction: float       # [J/kg]
+    initial_temperature: float    # [K]
+    runaway_temperature: float    # [K]
+    # Numerics
+    resolution: Resolution
+    runaway_fraction: float
+    dt_initial: float             # [s]
+    terms: tuple = field(default_factory=tuple)
+    flags: tuple = field(default_factory=tuple)
+
+    def flux_amplitude(self, height):
+        """q0 = mu sigma V0 [W/m^2] for drop height ``height`` [m] (Eqs. 1, 10)."""
+        return self.flux_per_root_height * math.sqrt(height)
+
+
+def build_model(scene, resolution=None, *, level=0.0, melting=True,
+                runaway_fraction=DEFAULT_RUNAWAY_FRACTION, horizon=HORIZON_EXIT_TIMES):
+    """Infer the model a scene needs and build its meshes.
+
+    Parameters
+    ----------
+    scene : skidmc.scene.Scene
+        The scene (SI attributes).
+    resolution : Resolution, optional
+        Numerical resolution; default ``resolution_for_level(level)``.
+    level : float
+        Refinement level used when ``resolution`` is not given.
+    melting : bool
+        Model melting of the HE (enthalpy plateau at T_m) when the scene has a
+        heat of fusion.
+    runaway_fraction : float
+        Runaway rule, see :mod:`skidmc.thermal` (0 disables it).
+    horizon : float
+        Integration horizon in exit times.
+
+    Returns
+    -------
+    SkidModel
+    """
+    if resolution is None:
+        resolution = resolution_for_level(level)
+    sigma = scene.flow_stress
+    mass = scene.billet_mass
+    diameter = scene.billet_diameter
+    mu = scene.mu
+    omega = float(mechanics.angular_frequency(sigma, mass, diameter))
+    t_c = float(mechanics.contact_time(sigma, mass, diameter))
+    t_exit, exit_kind = mechanics.exit_time(mu, scene.angle, scene.tilt, sigma, mass, diameter)
+    phi = math.radians(scene.angle)
+    slide_s = math.sin(phi)
+    slide_c = float(mechanics.sliding_deceleration_coefficient(mu, scene.tilt)) * math.cos(phi)
+
+    terms = ["frictional_heating", "friction_spin"]
+    flags = []
+    if scene.tilt > 0.0:
+        terms.append("normal_force_spin")
+    if exit_kind == "stops_sliding":
+        flags.append("stops_sliding")
+    if mu == 0.0:
+        terms = []
+        flags.append("no_friction")
+
+    # Flux extension after the exit, for the search's continuous margin only: keep
+    # the exit flux (continuous) unless it has dropped below the contact's mean.
+    wt = omega * t_exit
+    mean_shape = slide_s - slide_c * (1.0 - math.sin(wt) / wt)
+    exit_shape = max(slide_s - slide_c * (1.0 - math.cos(wt)), 0.0)
+    extension = max(exit_shape, mean_shape)
+
+    t_end = horizon * t_exit
+    he_rho_c = scene.he_density * scene.he_heat_capacity
+    tg_rho_c = scene.target_density * scene.target_heat_capacity
+    alpha_he = scene.he_conductivity / he_rho_c
+    alpha_tg = scene.target_conductivity / tg_rho_c
+
+    heat_of_reaction = scene.kinetics_heat_of_reaction
+    prefactor = scene.kinetics_prefactor
+    t_a = scene.kinetics_activation_temperature
+    adiabatic_rise = heat_of_reaction / scene.he_heat_capacity
+    if runaway_fraction > 0.0 and prefactor > 0.0 and adiabatic_rise > 0.0:
+        t_run = float(runaway_temperature(prefactor, t_a, adiabatic_rise, t_exit,
+                                          runaway_fraction))
+    else:
+        t_run = math.inf
+
+    latent = scene.he_heat_of_fusion if melting else 0.0
+    if latent > 0.0 and scene.he_melting_point < t_run:
+        terms.append("melting")
+    else:
+        latent = 0.0
+
+    # Meshes: first HE cell from the reaction zone, target's scaled by sqrt(alpha2/alpha1)
+    # so both resolve the same time scale; depth from each medium's diffusion length.
+    zone = estimated_reaction_zone(t_exit, alpha_he, scene.initial_temperature, prefactor, t_a)
+    h0_he = resolution.first_cell_fraction * zone
+    h0_tg = h0_he * math.sqrt(alpha_tg / alpha_he)
+    n_cells = resolution.cells_per_medium
+    w_he = geometric_widths(h0_he, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_he * t_end), n_cells)
+    w_tg = geometric_widths(h0_tg, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_tg * t_end), n_cells)
+
+    width = np.concatenate([w_tg[::-1], w_he])
+    rho_c = np.concatenate([np.full(n_cells, tg_rho_c), np.full(n_cells, he_rho_c)])
+    k = np.concatenate([np.full(n_cells, scene.target_conductivity),
+                        np.full(n_cells, scene.he_conductivity)])
+    # Face conductance between cells i and i+1: resistances w/(2k) in series (the
+    # interface face is Eq. 16's elimination of T_b).
+    half_res = width / (2.0 * k)
+    face = 1.0 / (half_res[:-1] + half_res[1:])
+    g_tg = 1.0 / half_res[n_cells - 1]
+    g_he = 1.0 / half_res[n_cells]
+    q_share_he = g_he / (g_tg + g_he)
+
+    return SkidModel(
+        omega=omega, contact_time=t_c, exit_time=t_exit, exit_kind=exit_kind,
+        slide_s=slide_s, slide_c=slide_c,
+        flux_per_root_height=mu * sigma * math.sqrt(2.0 * mechanics.STANDARD_GRAVITY),
+        extension_flux_factor=extension, end_time=t_end,
+        width=width, rho_c=rho_c, face_conductance=face, n_target=n_cells,
+        q_share_he=q_share_he, he_density=scene.he_density, latent_heat=latent,
+        melting_point=scene.he_melting_point, prefactor=prefactor,
+        activation_temperature=t_a, heat_of_reaction=heat_of_reaction,
+        initial_temperature=scene.initial_temperature, runaway_temperature=t_run,
+        resolution=resolution, runaway_fraction=runaway_fraction,
+        dt_initial=1e-6 * t_exit, terms=tuple(terms), flags=tuple(flags),
+    )

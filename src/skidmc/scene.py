@@ -1,0 +1,420 @@
+"""Scenes: the named, validated inputs of one skid-test simulation.
+
+A scene is the 19 flat keys of ``docs/architecture.md`` held as SI floats (angles in degrees)
+plus the configuration string, in a frozen :class:`Scene`. Build one with :func:`make_scene`,
+which starts from a preset or from nothing, applies overrides given as SI floats or unit strings
+(``"28000 psi"``), converts them (:func:`skidmc.units.to_si`) and validates them. Every rejected
+input raises :class:`skidmc.errors.SceneError` naming the key and the value as given.
+
+The billet tilt psi follows the configuration unless it is given explicitly (report Sec. II.C and
+physics notes sec. 1): for a vertical drop onto an inclined target psi = phi, the target angle;
+for the pendulum drop psi = 0, the harness keeps the flat face horizontal.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from collections.abc import Mapping
+
+from skidmc.errors import MissingKeyError, SceneError, UnknownKeyError
+from skidmc.units import to_si
+
+__all__ = [
+    "CONFIGURATIONS",
+    "DESCRIPTIONS",
+    "NUMERIC_KEYS",
+    "SCENE_KEYS",
+    "SI_UNITS",
+    "Scene",
+    "make_scene",
+]
+
+#: The scene vocabulary, in the order of docs/architecture.md.
+SCENE_KEYS: tuple[str, ...] = (
+    "mu",
+    "flow_stress",
+    "billet_mass",
+    "billet_diameter",
+    "configuration",
+    "angle",
+    "tilt",
+    "initial_temperature",
+    "he.density",
+    "he.heat_capacity",
+    "he.conductivity",
+    "he.heat_of_fusion",
+    "he.melting_point",
+    "kinetics.prefactor",
+    "kinetics.activation_temperature",
+    "kinetics.heat_of_reaction",
+    "target.density",
+    "target.heat_capacity",
+    "target.conductivity",
+)
+
+#: Keys holding a float; every key but ``configuration``.
+NUMERIC_KEYS: tuple[str, ...] = tuple(k for k in SCENE_KEYS if k != "configuration")
+
+#: Unit of each key inside skidmc (SI, angles in degrees), as pint spells it; also the ``units``
+#: attribute written to storage.
+SI_UNITS: dict[str, str] = {
+    "mu": "1",
+    "flow_stress": "Pa",
+    "billet_mass": "kg",
+    "billet_diameter": "m",
+    "configuration": "-",
+    "angle": "deg",
+    "tilt": "deg",
+    "initial_temperature": "K",
+    "he.density": "kg/m^3",
+    "he.heat_capacity": "J/(kg K)",
+    "he.conductivity": "W/(m K)",
+    "he.heat_of_fusion": "J/kg",
+    "he.melting_point": "K",
+    "kinetics.prefactor": "1/s",
+    "kinetics.activation_temperature": "K",
+    "kinetics.heat_of_reaction": "J/kg",
+    "target.density": "kg/m^3",
+    "target.heat_capacity": "J/(kg K)",
+    "target.conductivity": "W/(m K)",
+}
+
+#: Long name of each key with the report's symbol (storage ``long_name`` attribute).
+DESCRIPTIONS: dict[str, str] = {
+    "mu": "apparent coefficient of sliding friction mu, Eq. (1)",
+    "flow_stress": "plastic flow stress of the billet sigma, Eq. (5)",
+    "billet_mass": "billet mass W",
+    "billet_diameter": "billet (hemisphere) diameter D",
+    "configuration": "drop configuration (pendulum or vertical)",
+    "angle": "impact angle phi: complement of the approach angle (pendulum) or target angle "
+    "(vertical)",
+    "tilt": "billet tilt psi from the target plane (0 for pendulum; phi for vertical)",
+    "initial_temperature": "initial temperature of billet and target T0",
+    "he.density": "HE density rho_1",
+    "he.heat_capacity": "HE specific heat c_1",
+    "he.conductivity": "HE thermal conductivity k_1",
+    "he.heat_of_fusion": "HE latent heat of melting (0 disables melting)",
+    "he.melting_point": "HE melting temperature",
+    "kinetics.prefactor": "Arrhenius frequency factor Z",
+    "kinetics.activation_temperature": "Arrhenius activation temperature E/R",
+    "kinetics.heat_of_reaction": "heat of reaction per unit mass Q = Delta H / M.W.",
+    "target.density": "target density rho_2",
+    "target.heat_capacity": "target specific heat c_2",
+    "target.conductivity": "target thermal conductivity k_2",
+}
+
+#: Valid values of ``configuration``.
+CONFIGURATIONS: tuple[str, ...] = ("pendulum", "vertical")
+
+# Attribute name of each key (dots -> underscores) and back; attribute names are also accepted as
+# keys in overrides, so that ``scene.replace(he_density=1900.0)`` works.
+_FIELD_OF_KEY: dict[str, str] = {k: k.replace(".", "_") for k in SCENE_KEYS}
+_KEY_OF_NAME: dict[str, str] = {
+    **{field: key for key, field in _FIELD_OF_KEY.items()},
+    **{key: key for key in SCENE_KEYS},
+}
+
+_INF = math.inf
+# Allowed interval per numeric key: (low, low included, high, high included), in SI_UNITS.
+_BOUNDS: dict[str, tuple[float, bool, float, bool]] = {
+    "mu": (0.0, True, 5.0, False),
+    "flow_stress": (0.0, False, _INF, False),
+    "billet_mass": (0.0, False, _INF, False),
+    "billet_diameter": (0.0, False, _INF, False),
+    "angle": (0.0, False, 90.0, False),
+    "tilt": (0.0, True, 90.0, False),
+    "initial_temperature": (0.0, False, _INF, False),
+    "he.density": (0.0, False, _INF, False),
+    "he.heat_capacity": (0.0, False, _INF, False),
+    "he.conductivity": (0.0, False, _INF, False),
+    "he.heat_of_fusion": (0.0, True, _INF, False),
+    "he.melting_point": (0.0, False, _INF, False),
+    "kinetics.prefactor": (0.0, False, _INF, False),
+    "kinetics.activation_temperature": (0.0, False, _INF, False),
+    "kinetics.heat_of_reaction": (0.0, True, _INF, False),
+    "target.density": (0.0, False, _INF, False),
+    "target.heat_capacity": (0.0, False, _INF, False),
+    "target.conductivity": (0.0, False, _INF, False),
+}
+# Checks between two keys are raised on the first; make_scene names the second if only it was given.
+_PARTNER: dict[str, str] = {"initial_temperature": "he.melting_point"}
+_BOUND_NOTES: dict[str, str] = {
+    "mu": " (a friction coefficient of 5 or more is surely a typo)",
+}
+
+
+def _bound_reason(key: str) -> str:
+    lo, lo_in, hi, hi_in = _BOUNDS[key]
+    unit = SI_UNITS[key]
+    unit = f" {unit}" if unit not in ("1", "-") else ""
+    if hi == _INF:
+        rule = f"must be {'>=' if lo_in else '>'} {lo:g}{unit}"
+    else:
+        rule = f"must be in {'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}{unit}"
+    return rule + _BOUND_NOTES.get(key, "")
+
+
+def _in_bounds(key: str, x: float) -> bool:
+    lo, lo_in, hi, hi_in = _BOUNDS[key]
+    return (x >= lo if lo_in else x > lo) and (x <= hi if hi_in else x < hi)
+
+
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    """The validated inputs of one skid-test simulation, in SI units (angles in degrees).
+
+    Construct with :func:`make_scene` (unit strings, presets, defaults for ``tilt``); direct
+    construction takes SI floats and validates them the same way.
+
+    Attributes
+    ----------
+    mu : float
+        Apparent coefficient of sliding friction, Eq. (1) [1].
+    flow_stress : float
+        Plastic flow stress of the billet sigma [Pa].
+    billet_mass : float
+        Billet mass W [kg].
+    billet_diameter : float
+        Hemisphere diameter D [m].
+    configuration : str
+        ``"pendulum"`` or ``"vertical"``.
+    angle : float
+        phi: complement of the approach angle (pendulum) or target angle (vertical) [deg].
+    tilt : float
+        psi: billet tilt; 0 for the pendulum, equal to `angle` for the vertical drop [deg].
+    initial_temperature : float
+        T0 [K].
+    he_density, he_heat_capacity, he_conductivity : float
+        HE density [kg/m^3], specific heat [J/(kg K)], thermal conductivity [W/(m K)].
+    he_heat_of_fusion : float
+        HE latent heat of melting, 0 disables melting [J/kg].
+    he_melting_point : float
+        HE melting temperature [K].
+    kinetics_prefactor : float
+        Arrhenius frequency factor Z [1/s].
+    kinetics_activation_temperature : float
+        Activation temperature E/R [K].
+    kinetics_heat_of_reaction : float
+        Heat of reaction per unit mass Q [J/kg].
+    target_density, target_heat_capacity, target_conductivity : float
+        Target density [kg/m^3], specific heat [J/(kg K)], thermal conductivity [W/(m K)].
+
+    Raises
+    ------
+    SceneError
+        On any invalid value (see :func:`make_scene`).
+    """
+
+    mu: float
+    flow_stress: float
+    billet_mass: float
+    billet_diameter: float
+    configuration: str
+    angle: float
+    tilt: float
+    initial_temperature: float
+    he_density: float
+    he_heat_capacity: float
+    he_conductivity: float
+    he_heat_of_fusion: float
+    he_melting_point: float
+    kinetics_prefactor: float
+    kinetics_activation_temperature: float
+    kinetics_heat_of_reaction: float
+    target_density: float
+    target_heat_capacity: float
+    target_conductivity: float
+
+    def __post_init__(self) -> None:
+        for key in NUMERIC_KEYS:
+            field = _FIELD_OF_KEY[key]
+            value = getattr(self, field)
+            if isinstance(value, bool) or not isinstance(value, numbers.Real):
+                raise SceneError(
+                    key, value,
+                    f"Scene() takes a real number in [{SI_UNITS[key]}]; use make_scene() for "
+                    "unit strings",
+                )
+            x = float(value)
+            if not math.isfinite(x):
+                raise SceneError(key, value, "must be finite")
+            if not _in_bounds(key, x):
+                raise SceneError(key, value, _bound_reason(key))
+            object.__setattr__(self, field, x)
+        if self.configuration not in CONFIGURATIONS:
+            raise SceneError(
+                "configuration", self.configuration,
+                "must be one of " + ", ".join(repr(c) for c in CONFIGURATIONS),
+            )
+        if self.configuration == "vertical" and not math.isclose(
+            self.tilt, self.angle, rel_tol=1e-9, abs_tol=1e-9
+        ):
+            raise SceneError(
+                "tilt", self.tilt,
+                f"must equal angle ({self.angle:g} deg) for a vertical drop, where the billet's "
+                "flat face is horizontal and psi = phi (report Sec. II.C); leave tilt out to have "
+                "it follow angle",
+            )
+        if self.initial_temperature >= self.he_melting_point:
+            raise SceneError(
+                "initial_temperature", self.initial_temperature,
+                f"initial_temperature ({self.initial_temperature:g} K) must be below "
+                f"he.melting_point ({self.he_melting_point:g} K)",
+            )
+
+    def as_dict(self) -> dict[str, float | str]:
+        """Flat dotted keys -> SI values, in the order of :data:`SCENE_KEYS`."""
+        return {key: getattr(self, _FIELD_OF_KEY[key]) for key in SCENE_KEYS}
+
+    def replace(self, mapping: Mapping | None = None, /, **overrides) -> Scene:
+        """A new scene with some values changed, re-validated.
+
+        Parameters
+        ----------
+        mapping : mapping, optional
+            Overrides with dotted keys (or nested dicts), values as in :func:`make_scene`.
+        **overrides
+            More overrides; dotted keys via ``**{"he.density": 1900.0}`` or attribute names
+            (``he_density=1900.0``).
+
+        Returns
+        -------
+        Scene
+            ``make_scene(mapping, preset=self, **overrides)``: an unchanged default ``tilt`` keeps
+            following the configuration (it tracks a new ``angle`` in a vertical drop).
+        """
+        return make_scene(mapping, preset=self, **overrides)
+
+    def describe(self) -> str:
+        """An aligned plain-text table: key, value, unit, description."""
+        rows = []
+        for key, value in self.as_dict().items():
+            unit = SI_UNITS[key]
+            shown = value if isinstance(value, str) else f"{value:.6g}"
+            rows.append((key, shown, "" if unit in ("1", "-") else unit, DESCRIPTIONS[key]))
+        widths = [max(len(r[i]) for r in rows) for i in range(3)]
+        return "\n".join(
+            f"{k:<{widths[0]}}  {v:>{widths[1]}}  {u:<{widths[2]}}  {d}" for k, v, u, d in rows
+        )
+
+
+def _flatten(mapping: Mapping, prefix: str = "", out: dict | None = None) -> dict:
+    """Nested dicts (as read from TOML) -> flat dotted keys; attribute names -> dotted keys."""
+    out = {} if out is None else out
+    for name, value in mapping.items():
+        if not isinstance(name, str):
+            raise UnknownKeyError(str(name), value, SCENE_KEYS)
+        dotted = prefix + name
+        if isinstance(value, Mapping):
+            _flatten(value, dotted + ".", out)
+            continue
+        key = _KEY_OF_NAME.get(dotted, dotted)
+        if key in out:
+            raise SceneError(key, value, f"given twice (also as {out[key]!r})")
+        out[key] = value
+    return out
+
+
+def _base_values(preset: str | Scene | None) -> dict:
+    if preset is None:
+        return {}
+    if isinstance(preset, Scene):
+        return preset.as_dict()
+    if isinstance(preset, str):
+        from skidmc.presets import get_preset  # presets build on this module
+
+        return get_preset(preset).as_dict()
+    raise SceneError("preset", preset, "expected a preset name or a Scene")
+
+
+def _convert(key: str, value: object) -> float | str:
+    if key == "configuration":
+        if not isinstance(value, str):
+            raise SceneError(key, value, "must be one of " + ", ".join(map(repr, CONFIGURATIONS)))
+        return value.strip().lower()
+    return to_si(key, value, SI_UNITS[key])
+
+
+def make_scene(
+    mapping: Mapping | None = None, *, preset: str | Scene | None = None, **overrides
+) -> Scene:
+    """Build a validated :class:`Scene` from a preset and overrides with units.
+
+    Parameters
+    ----------
+    mapping : mapping, optional
+        Overrides with dotted keys (``{"he.density": "1.91 g/cm^3"}``) or nested dicts as read
+        from TOML (``{"he": {"density": ...}}``). Attribute names (``he_density``) are accepted too.
+        Values are SI floats or strings with units (:func:`skidmc.units.to_si`).
+    preset : str or Scene, optional
+        Name of a preset (:mod:`skidmc.presets`) or a scene to start from. Without one, every key
+        of :data:`SCENE_KEYS` must be given (``tilt`` may be left to its default).
+    **overrides
+        More overrides, applied after `mapping` (a key in both takes this value).
+
+    Returns
+    -------
+    Scene
+        The validated scene, SI floats (angles in degrees).
+
+    Raises
+    ------
+    UnknownKeyError
+        A key not in :data:`SCENE_KEYS`, with close matches suggested.
+    MissingKeyError
+        No preset, and some key has no value.
+    UnitError
+        Units that cannot be parsed or have the wrong dimension.
+    SceneError
+        Otherwise invalid: not a single number (booleans and lists are refused); not finite;
+        out of range (``flow_stress``, ``billet_mass``, ``billet_diameter``, densities, heat
+        capacities, conductivities, ``kinetics.prefactor``, ``kinetics.activation_temperature``,
+        ``initial_temperature``, ``he.melting_point`` > 0; ``he.heat_of_fusion``,
+        ``kinetics.heat_of_reaction`` >= 0; 0 <= ``mu`` < 5; 0 < ``angle`` < 90 deg;
+        0 <= ``tilt`` < 90 deg); ``configuration`` not ``"pendulum"``/``"vertical"``; a vertical
+        drop whose ``tilt`` differs from ``angle``; ``initial_temperature`` not below
+        ``he.melting_point``.
+
+    Notes
+    -----
+    ``tilt`` not given in the overrides follows the configuration: it equals ``angle`` for a
+    vertical drop (report Sec. II.C: psi = phi), and for a pendulum drop it is the starting
+    scene's tilt if that was a pendulum scene too, else 0 (the harness keeps the billet level).
+    """
+    base = _base_values(preset)
+    if mapping is not None and not isinstance(mapping, Mapping):
+        raise SceneError("mapping", mapping, "expected a mapping of scene keys to values")
+    given = _flatten(mapping or {})
+    given.update(_flatten(overrides))  # keyword overrides win over the mapping
+    values = dict(base)
+    for key, raw in given.items():
+        if key not in SI_UNITS:
+            raise UnknownKeyError(key, raw, SCENE_KEYS)
+        values[key] = _convert(key, raw)
+
+    if "tilt" not in given and "configuration" in values:
+        if values["configuration"] == "vertical" and "angle" in values:
+            values["tilt"] = values["angle"]
+        elif values["configuration"] == "pendulum" and base.get("configuration") != "pendulum":
+            values["tilt"] = 0.0
+
+    missing = [key for key in SCENE_KEYS if key not in values]
+    if missing:
+        raise MissingKeyError(
+            missing[0], None,
+            "missing; no value for " + ", ".join(missing) + "; give them or start from a preset",
+        )
+    try:
+        return Scene(**{_FIELD_OF_KEY[key]: values[key] for key in SCENE_KEYS})
+    except SceneError as err:
+        # Name the value as the user wrote it (not its SI conversion), and for a check between two
+        # keys name the one the user gave.
+        key = err.key
+        if key not in given and _PARTNER.get(key) in given:
+            key = _PARTNER[key]
+        if key in given:
+            raise SceneError(key, given[key], err.reason) from None
+        raise
+

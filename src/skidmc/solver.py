@@ -1,0 +1,311 @@
+"""Simulation of one impact and the search for the critical drop height.
+
+The critical height H_c is where the time of the thermal event, t_ev(H), equals the
+exit time t_exit (rebound or end of sliding), which does not depend on H. The
+search works on the continuous margin
+
+    m(H) = ln(t_ev(H) / t_exit),     go  <=>  m <= 0,
+
+where, beyond t_exit, the flux is extended (:mod:`skidmc.model`) so that t_ev stays
+finite a little below H_c; m is smooth and close to linear in ln H (the surface
+temperature rises roughly as sqrt(q^2 t) ~ sqrt(H t), so t_ev ~ 1/H), which lets a
+bracketing Brent iteration converge in a handful of simulations. The extension
+never changes a verdict: at the root, t_ev = t_exit and the extended flux has not
+acted yet. The report's own method, geometric bisection on go/no-go, is kept as
+``method="bisection"``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy.optimize import brentq
+
+from skidmc.errors import SceneError
+from skidmc.model import build_model
+from skidmc.thermal import (INFO_EVENT, INFO_FAILED, INFO_REJECTED, INFO_STEPS,
+                            INFO_T_EVENT, INFO_T_EXIT_MAX, INFO_T_MAX, INFO_Y_EXIT_MAX,
+                            simulate_kernel)
+
+FT = 0.3048  # [m per ft], exact
+
+#: Default search bounds [m]: 1 mm to 10 km of drop height.
+DEFAULT_H_MIN = 1e-3
+DEFAULT_H_MAX = 1e4
+
+#: Numerical-error calibration: the refinement study (scripts/refinement_study.py,
+#: results/validation/refinement.md) gives the discretisation error of the critical
+#: height at level L as about ERROR_LEVEL0 * 4**-L over all report presets (second
+#: order). The solver picks the lowest level whose error is below half of rtol; the
+#: other half goes to the root finder's tolerance.
+ERROR_LEVEL0 = 3e-2
+MAX_STEPS = 200_000
+
+
+class SolverError(RuntimeError):
+    """The time integration could not proceed (step size underflow or step cap)."""
+
+
+@dataclass
+class Simulation:
+    """Outcome of one impact at one drop height."""
+
+    height: float            # [m]
+    event: bool              # thermal event before the exit time
+    event_time: float        # [s] (inf: none within the horizon)
+    exit_time: float         # [s]
+    margin: float            # ln(t_ev / t_exit) [1] (inf when no event in the horizon)
+    steps: int
+    rejected: int
+    max_temperature: float   # highest HE cell temperature reached [K]
+    exit_max_temperature: float  # highest HE cell temperature at t_exit [K]
+    exit_max_reacted: float  # highest fraction reacted at t_exit [1]
+    times: np.ndarray | None = None                  # [s]
+    interface_temperature: np.ndarray | None = None  # [K]
+
+
+def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=None):
+    """Simulate the impact from drop height ``height`` [m].
+
+    Parameters
+    ----------
+    model : skidmc.model.SkidModel
+    height : float
+        Vertical drop height H [m].
+    record : bool
+        Keep the interface temperature history (for checks and figures).
+    flux_override : tuple, optional
+        ``(q0, s, c, omega, t_exit, q_ext)`` to impose another flux shape (tests).
+
+    Returns
+    -------
+    Simulation
+    """
+    if flux_override is None:
+        q0 = model.flux_amplitude(height)
+        flux = (q0, model.slide_s, model.slide_c, model.omega, model.exit_time,
+                q0 * model.extension_flux_factor)
+    else:
+        flux = tuple(float(v) for v in flux_override)
+    n_rec = max_steps if record else 0
+    rec_t = np.zeros(min(n_rec, 100_000))
+    rec_tb = np.zeros_like(rec_t)
+    info = simulate_kernel(
+        model.width, model.rho_c, model.face_conductance, model.n_target, model.q_share_he,
+        model.he_density, model.latent_heat, model.melting_point, model.resolution.melt_width,
+        model.prefactor, model.activation_temperature, model.heat_of_reaction,
+        flux[0], flux[1], flux[2], flux[3], flux[4], flux[5], model.end_time,
+        model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
+        model.runaway_fraction, max_steps, rec_t, rec_tb)
+    if info[INFO_FAILED] or (info[INFO_STEPS] + info[INFO_REJECTED] >= max_steps
+                             and not info[INFO_EVENT]):
+        raise SolverError(
+            f"time integration failed at H = {height:.6g} m after {int(info[INFO_STEPS])} "
+            f"steps ({int(info[INFO_REJECTED])} rejected)")
+    t_ev = info[INFO_T_EVENT]
+    t_exit = model.exit_time
+    steps = int(info[INFO_STEPS])
+    sim = Simulation(
+        height=float(height), event=bool(info[INFO_EVENT]) and t_ev <= t_exit,
+        event_time=float(t_ev), exit_time=t_exit,
+        margin=math.log(t_ev / t_exit) if np.isfinite(t_ev) else math.inf,
+        steps=steps, rejected=int(info[INFO_REJECTED]),
+        max_temperature=float(info[INFO_T_MAX]),
+        exit_max_temperature=float(info[INFO_T_EXIT_MAX]),
+        exit_max_reacted=float(info[INFO_Y_EXIT_MAX]),
+    )
+    if record:
+        n = min(steps, rec_t.shape[0])
+        sim.times = rec_t[:n].copy()
+        sim.interface_temperature = rec_tb[:n].copy()
+    return sim
+
+
+@dataclass
+class HeightResult:
+    """Critical drop height of one scene.
+
+    Attributes
+    ----------
+    critical_height : float
+        Critical drop height [m]; for censored results the bound that was hit.
+    censored : str or None
+        None, ``"above"`` (no event up to ``h_max``) or ``"below"`` (event at ``h_min``).
+    evaluations : int
+        Number of impact simulations used.
+    flags : tuple of str
+        Model-validity notes, e.g. ``"stops_sliding"`` (heating ended before rebound),
+        ``"no_friction"``.
+    error_estimate : float
+        Estimated relative numerical error of ``critical_height`` [1].
+    rtol, level, method, wall_time, exit_time, exit_kind, terms
+        Settings and diagnostics (wall_time [s], exit_time [s]).
+    """
+
+    critical_height: float
+    censored: str | None
+    evaluations: int
+    flags: tuple = ()
+    error_estimate: float = math.nan
+    rtol: float = 1e-3
+    level: float = 0.0
+    method: str = "brent"
+    wall_time: float = 0.0
+    exit_time: float = math.nan
+    exit_kind: str = ""
+    terms: tuple = ()
+    history: list = field(default_factory=list, repr=False)
+
+    @property
+    def critical_height_ft(self):
+        """Critical drop height [ft]."""
+        return self.critical_height / FT
+
+    def to_dict(self):
+        """JSON-ready dictionary (heights in m and ft)."""
+        d = asdict(self)
+        d.pop("history")
+        d["critical_height_m"] = d.pop("critical_height")
+        d["critical_height_ft"] = self.critical_height_ft
+        d["flags"] = list(self.flags)
+        d["terms"] = list(self.terms)
+        return d
+
+
+def level_for_rtol(rtol):
+    """Refinement level whose estimated discretisation error is below rtol / 2 [1]."""
+    if not rtol > 0.0:
+        raise SceneError("rtol", rtol, "must be > 0")
+    return max(0.0, math.ceil(2.0 * math.log(ERROR_LEVEL0 / (0.5 * rtol)) / math.log(4.0)) / 2.0)
+
+
+def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
+                    *, method="brent", level=None, melting=True, runaway_fraction=None,
+                    h_guess=None, model=None):
+    """Critical drop height of a scene [m].
+
+    Parameters
+    ----------
+    scene : skidmc.scene.Scene
+    rtol : float
+        Relative tolerance on the critical height [1]: half goes to the mesh and
+        steps (see :func:`level_for_rtol`), half to the root finder.
+    tier : {"full"}
+        Model fidelity.
+    h_min, h_max : float
+        Search bounds [m]. No event at ``h_max`` is censored "above"; an event at
+        ``h_min`` is censored "below". Neither is an error.
+    method : {"brent", "bisection"}
+        Brent's method on the continuous margin (default), or the report's
+        geometric bisection on go/no-go.
+    level : float, optional
+        Force a refinement level instead of deriving it from ``rtol``.
+    melting : bool
+        Model melting of the HE.
+    runaway_fraction : float, optional
+        Override the runaway rule (:data:`skidmc.model.DEFAULT_RUNAWAY_FRACTION`).
+    h_guess : float, optional
+        First height tried [m].
+    model : SkidModel, optional
+        A prebuilt model (overrides scene, level, melting, runaway_fraction).
+
+    Returns
+    -------
+    HeightResult
+    """
+    start = time.perf_counter()
+    if tier != "full":
+        raise SceneError("tier", tier, "unknown tier (expected 'full')")
+    if not (0.0 < h_min < h_max):
+        raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
+    if not (isinstance(rtol, (int, float)) and 0.0 < rtol < 0.5):
+        raise SceneError("rtol", rtol, "must be a number in (0, 0.5)")
+    if level is None:
+        level = level_for_rtol(rtol)
+    if model is None:
+        kwargs = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
+        model = build_model(scene, level=level, melting=melting, **kwargs)
+    base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
+                exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
+                error_estimate=ERROR_LEVEL0 * 4.0 ** (-level) + 0.5 * rtol)
+
+    if "no_friction" in model.flags:
+        return HeightResult(critical_height=h_max, censored="above", evaluations=0,
+                            wall_time=time.perf_counter() - start, **base)
+
+    cache = {}
+
+    def margin(x):
+        if x not in cache:
+            cache[x] = simulate(model, math.exp(x)).margin
+        return cache[x]
+
+    x_min, x_max = math.log(h_min), math.log(h_max)
+    x_tol = 0.5 * rtol  # root-finder share of the budget, on ln H
+
+    if method == "bisection":
+        x_root, censored = _bisection(margin, x_min, x_max, x_tol)
+    elif method == "brent":
+        x_root, censored = _brent(margin, x_min, x_max, x_tol, model, h_guess)
+    else:
+        raise SceneError("method", method, "expected 'brent' or 'bisection'")
+    history = sorted((math.exp(x), m) for x, m in cache.items())
+    return HeightResult(critical_height=math.exp(x_root), censored=censored,
+                        evaluations=len(cache), wall_time=time.perf_counter() - start,
+                        history=history, **base)
+
+
+def _bisection(margin, x_min, x_max, x_tol):
+    """The report's search: geometric mean of the lowest go and the highest no-go."""
+    if margin(x_max) > 0.0:
+        return x_max, "above"
+    if margin(x_min) <= 0.0:
+        return x_min, "below"
+    lo, hi = x_min, x_max
+    while hi - lo > x_tol:
+        mid = 0.5 * (lo + hi)
+        if margin(mid) <= 0.0:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi), None
+
+
+def _brent(margin, x_min, x_max, x_tol, model, h_guess):
+    """Bracket the root of the margin from a first guess, then Brent's method on ln H."""
+    horizon = math.log(model.end_time / model.exit_time)
+    x = math.log(h_guess) if h_guess else 0.0  # 1 m by default
+    x = min(max(x, x_min), x_max)
+    lo = hi = None  # ln H of the highest no-go and the lowest go
+    for _ in range(60):
+        m = margin(x)
+        if m > 0.0:
+            lo = x if lo is None else max(lo, x)
+        else:
+            hi = x if hi is None else min(hi, x)
+        if lo is not None and hi is not None:
+            break
+        if m > 0.0:
+            if x >= x_max:
+                return x_max, "above"
+            # t_ev ~ 1/H: the root lies about m above; with no event in the horizon, at
+            # least `horizon` above. Overshoot a little so one step usually brackets.
+            step = 1.2 * m + 0.05 if math.isfinite(m) else 2.0 * horizon
+            x = min(x + step, x_max)
+        else:
+            if x <= x_min:
+                return x_min, "below"
+            x = max(x + 1.2 * m - 0.05, x_min)
+    else:  # pragma: no cover - the loop always brackets or censors within 60 steps
+        raise SolverError("could not bracket the critical height")
+
+    def bounded(xx):
+        # Brent needs finite values; "no event within the horizon" means m > horizon.
+        m = margin(xx)
+        return m if math.isfinite(m) else 2.0 * horizon + 1.0
+
+    x_root = brentq(bounded, lo, hi, xtol=x_tol, rtol=4 * np.finfo(float).eps)
+    return x_root, None

@@ -1,0 +1,469 @@
+"""Reactive heat conduction in two media joined at a sliding interface (report II.E).
+
+Compiled kernels in SI units. The HE (medium 1) and the target (medium 2) each get
+their own cell-centred finite-volume mesh, geometrically stretched away from the
+interface where the frictional flux q(t) enters (report Eqs. 11-16):
+
+* the interface temperature T_b is eliminated exactly as in Eq. (16): with face
+  conductances g = 2 k / (first cell width) on each side, q splits between the two
+  first cells in proportion g_1 : g_2 and the two cells exchange heat through the
+  series conductance g_1 g_2 / (g_1 + g_2);
+* the HE obeys Eq. (11) with first-order Arrhenius decomposition,
+  dy/dt = Z exp(-T_a / T) (1 - y), heat release rho Q dy/dt (Eq. 13), and melts at
+  T_m with latent heat L through an enthalpy formulation (the cell's volumetric
+  enthalpy h is the unknown; T(h) is piecewise linear with a plateau at T_m);
+* the target obeys Eq. (12); far ends are insulated (they lie many diffusion
+  lengths away).
+
+Time stepping is the variable-step, L-stable BDF2 method with Newton iterations on
+the (tridiagonal) system and a local-error step controller. The fraction reacted is
+updated implicitly in closed form inside each Newton iteration, which keeps the
+source bounded however stiff the reaction gets.
+
+Thermal runaway is detected robustly instead of being integrated to the end: once
+the hottest HE cell passes the *runaway temperature* T_run, at which the adiabatic
+(Frank-Kamenetskii) induction time is a fixed small fraction of the contact time,
+nothing can quench it within the contact, and the event time is taken as the
+crossing time plus that induction time. The report's own criterion (fraction reacted
+above 0.99 in any cell) is checked too and ends the run if it comes first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# Indices into the info array returned by :func:`simulate_kernel`.
+INFO_EVENT = 0          # 1.0 when a thermal event occurred before t_end
+INFO_T_EVENT = 1        # event time [s] (inf when none)
+INFO_STEPS = 2          # accepted time steps
+INFO_REJECTED = 3       # rejected time steps
+INFO_T_MAX = 4          # highest HE cell temperature reached [K]
+INFO_Y_MAX = 5          # highest fraction reacted reached [1]
+INFO_T_FINAL = 6        # time reached [s]
+INFO_FAILED = 7         # 1.0 when the integrator could not proceed (step underflow)
+INFO_T_EXIT_MAX = 8     # highest HE cell temperature at the exit time t_exit [K]
+INFO_Y_EXIT_MAX = 9     # highest fraction reacted at the exit time [1]
+INFO_SIZE = 10
+
+# Ratio LTE / (corrector - quadratic predictor) of BDF2 at constant step:
+# BDF2 error -(2/9) h^3 y''', predictor error +h^3 y''' -> 2/11.
+_BDF2_ERROR_CONSTANT = 2.0 / 11.0
+
+
+@njit(cache=True, inline="always")
+def _flux(t, q0, s, c, w, t_exit, q_ext):
+    """Frictional flux q(t) [W/m^2]: q0 (s - c (1 - cos w t)) on [0, t_exit), then q_ext."""
+    if t < t_exit:
+        v = s - c * (1.0 - np.cos(w * t))
+        return q0 * v if v > 0.0 else 0.0
+    return q_ext
+
+
+@njit(cache=True, inline="always")
+def _he_enthalpy(temperature, rho_c, latent_v, melting_point, melt_width):
+    """Volumetric enthalpy h [J/m^3] of an HE cell and its derivative dh/dT [J/(m^3 K)].
+
+    h = rho c T + rho L phi(T), with melt fraction phi = (1 + tanh((T - T_m)/w)) / 2:
+    the latent heat is released smoothly over a few widths ``melt_width`` = w [K]
+    around T_m. The width is a discretisation parameter that shrinks with the
+    resolution level (sharp Stefan melting is the limit w -> 0); a smooth enthalpy
+    keeps the BDF2 error control from resolving every cell's melting kink.
+    """
+    if latent_v <= 0.0:
+        return rho_c * temperature, rho_c
+    z = (temperature - melting_point) / melt_width
+    if z > 30.0:
+        return rho_c * temperature + latent_v, rho_c
+    if z < -30.0:
+        return rho_c * temperature, rho_c
+    th = np.tanh(z)
+    return (rho_c * temperature + 0.5 * latent_v * (1.0 + th),
+            rho_c + 0.5 * latent_v * (1.0 - th * th) / melt_width)
+
+
+@njit(cache=True)
+def runaway_temperature(prefactor, activation_temperature, adiabatic_rise, time_scale,
+                        fraction):
+    """Temperature [K] at which the adiabatic induction time equals ``fraction * time_scale``.
+
+    The Frank-Kamenetskii adiabatic induction time of first-order kinetics is
+    tau(T) = T^2 / (T_a * dT_ad * Z exp(-T_a / T)), with dT_ad = Q / c the adiabatic
+    temperature rise. Solved by bisection on ln tau, which decreases monotonically
+    in T for T < T_a / 2.
+    """
+    target = np.log(fraction * time_scale)
+    lo = 1.0
+    hi = 0.5 * activation_temperature
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        ln_tau = (2.0 * np.log(mid) - np.log(activation_temperature * adiabatic_rise)
+                  - np.log(prefactor) + activation_temperature / mid)
+        if ln_tau > target:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-9 * hi:
+            break
+    return 0.5 * (lo + hi)
+
+
+@njit(cache=True)
+def adiabatic_induction_time(temperature, prefactor, activation_temperature, adiabatic_rise):
+    """Frank-Kamenetskii adiabatic induction time [s] at ``temperature`` [K]."""
+    return temperature**2 / (activation_temperature * adiabatic_rise * prefactor
+                             * np.exp(-activation_temperature / temperature))
+
+
+@njit(cache=True)
+def _solve_tridiagonal(lower, diag, upper, rhs, cp, dp, out):
+    """Thomas algorithm; ``lower[i]`` couples i to i-1, ``upper[i]`` couples i to i+1."""
+    n = diag.shape[0]
+    cp[0] = upper[0] / diag[0]
+    dp[0] = rhs[0] / diag[0]
+    for i in range(1, n):
+        m = diag[i] - lower[i] * cp[i - 1]
+        cp[i] = upper[i] / m
+        dp[i] = (rhs[i] - lower[i] * dp[i - 1]) / m
+    out[n - 1] = dp[n - 1]
+    for i in range(n - 2, -1, -1):
+        out[i] = dp[i] - cp[i] * out[i + 1]
+
+
+@njit(cache=True, nogil=True)
+def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
+                    he_density, latent_heat, melting_point, melt_width,
+                    prefactor, activation_temperature, heat_of_reaction,
+                    q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
+                    initial_temperature, tol_temperature, dt_initial,
+                    runaway_fraction, max_steps, record_t, record_tb):
+    """Integrate one impact from t = 0 to an event or ``t_end``.
+
+    Parameters
+    ----------
+    width : ndarray, shape (n,)
+        Cell widths [m], ordered from the deep target (index 0) to the interface
+        (``n_target - 1`` | ``n_target``) to the deep HE (``n - 1``).
+    rho_c : ndarray, shape (n,)
+        Volumetric heat capacity of each cell [J/(m^3 K)].
+    face_conductance : ndarray, shape (n - 1,)
+        Conductance of the face between cells i and i+1 [W/(m^2 K)]; at the
+        interface, the series conductance g_1 g_2 / (g_1 + g_2) of Eq. (16).
+    n_target : int
+        Number of target cells; HE cells are ``n_target .. n-1``.
+    q_share_he : float
+        Fraction of the interface flux entering the first HE cell, g_1/(g_1+g_2) [1].
+    he_density : float
+        HE density [kg/m^3].
+    latent_heat : float
+        Heat of fusion L [J/kg]; 0 disables melting.
+    melting_point, melt_width : float
+        T_m [K] and the width w [K] over which the latent heat is released.
+    prefactor, activation_temperature, heat_of_reaction : float
+        Z [1/s], T_a = E/R [K], Q [J/kg]; Z = 0 makes the HE inert.
+    q0, slide_s, slide_c, omega, t_exit, q_ext : float
+        Flux q(t) = q0 (s - c (1 - cos omega t)) [W/m^2] before ``t_exit`` [s]
+        (Eqs. 1 and 10, q0 = mu sigma V0), ``q_ext`` [W/m^2] after it.
+    t_end : float
+        End of the integration [s].
+    initial_temperature : float
+        T0 [K].
+    tol_temperature : float
+        Local error tolerance of the step controller [K].
+    dt_initial : float
+        First time step [s] (also after the flux jumps at ``t_exit``).
+    runaway_fraction : float
+        Runaway is declared when the hottest cell's adiabatic induction time falls
+        below ``runaway_fraction * t_exit``; 0 disables the rule and only the
+        report's y > 0.99 criterion ends the run.
+    max_steps : int
+        Cap on accepted plus rejected steps.
+    record_t, record_tb : ndarray
+        If non-empty, the time [s] and interface temperature [K] after each
+        accepted step are written there (up to their length).
+
+    Returns
+    -------
+    info : ndarray, shape (INFO_SIZE,)
+        See the ``INFO_*`` indices of this module.
+    """
+    n = width.shape[0]
+    n_he = n - n_target
+    # Temperatures (the unknowns) and enthalpies at t_n, t_{n-1}, t_{n-2}.
+    temp = np.empty(n)
+    temp_prev = np.empty(n)
+    temp_prev2 = np.empty(n)
+    temp_new = np.empty(n)
+    h = np.empty(n)
+    h_prev = np.empty(n)
+    h_new = np.empty(n)
+    dhdt = np.empty(n)
+    y = np.zeros(n_he)
+    y_prev = np.zeros(n_he)
+    y_new = np.zeros(n_he)
+    hist_h = np.empty(n)
+    hist_y = np.empty(n_he)
+    lower = np.zeros(n)
+    diag = np.empty(n)
+    upper = np.zeros(n)
+    resid = np.empty(n)
+    delta = np.empty(n)
+    cp = np.empty(n)
+    dp = np.empty(n)
+
+    latent_v = he_density * latent_heat
+    q_v = he_density * heat_of_reaction
+    rho_c_he = rho_c[n_target]
+    adiabatic_rise = heat_of_reaction / (rho_c_he / he_density)
+    reactive = prefactor > 0.0 and heat_of_reaction >= 0.0
+    if runaway_fraction > 0.0 and reactive and adiabatic_rise > 0.0:
+        t_run = runaway_temperature(prefactor, activation_temperature, adiabatic_rise,
+                                    t_exit, runaway_fraction)
+    else:
+        t_run = np.inf
+    # Past t_relax (adiabatic induction time below 1e-9 t_exit) the run is a runaway
+    # whatever happens next: the step error control is dropped there, and steps are
+    # limited only by Newton's convergence, so that the report's own criterion
+    # (y > 0.99) is reached in a few dozen steps instead of stalling. The event time
+    # moves by at most ~1e-9 t_exit.
+    t_relax = np.inf
+    if reactive and adiabatic_rise > 0.0:
+        t_relax = runaway_temperature(prefactor, activation_temperature, adiabatic_rise,
+                                      t_exit, 1e-9)
+    # Below t_cold the fraction a cell could react over the whole run, Z exp(-Ta/T) t_end,
+    # is under 1e-15: its source is skipped (it would not change a double).
+    t_cold = 0.0
+    if reactive and prefactor * t_end > 1e15:
+        t_cold = activation_temperature / np.log(prefactor * t_end * 1e15)
+
+    for i in range(n):
+        temp[i] = initial_temperature
+        temp_prev[i] = initial_temperature
+        temp_prev2[i] = initial_temperature
+        if i >= n_target:
+            h[i], dhdt[i] = _he_enthalpy(initial_temperature, rho_c[i], latent_v,
+                                         melting_point, melt_width)
+        else:
+            h[i] = rho_c[i] * initial_temperature
+        h_prev[i] = h[i]
+
+    info = np.zeros(INFO_SIZE)
+    info[INFO_T_EVENT] = np.inf
+    info[INFO_T_MAX] = initial_temperature
+    info[INFO_T_EXIT_MAX] = np.nan
+    info[INFO_Y_EXIT_MAX] = np.nan
+    n_record = record_t.shape[0]
+    # Side conductances at the interface, for the recorded T_b of Eq. (16):
+    # G = g_t g_h / (g_t + g_h) and s = g_h / (g_t + g_h) give g_t = G / s, g_h = G / (1 - s).
+    g_t = face_conductance[n_target - 1] / q_share_he
+    g_h = face_conductance[n_target - 1] / (1.0 - q_share_he)
+
+    t = 0.0
+    dt = dt_initial
+    dt_prev = dt_initial
+    dt_prev2 = dt_initial
+    n_hist = 0          # accepted steps since the last (re)start of the multistep history
+    steps = 0
+    rejected = 0
+    t_max_prev = initial_temperature
+    y_max_prev = 0.0
+    newton_tol = 1e-2 * tol_temperature
+
+    while t < t_end and steps + rejected < max_steps:
+        # Land exactly on t_exit (flux kink or jump) and on t_end.
+        if t < t_exit and t + dt > t_exit:
+            dt = t_exit - t
+        if t + dt > t_end:
+            dt = t_end - t
+        t_new = t + dt
+
+        # BDF coefficients: h_new = a1 h - a2 h_prev + beta dt f(T_new).
+        if n_hist == 0:
+            a1, a2, beta = 1.0, 0.0, 1.0        # backward Euler start
+        else:
+            om = dt / dt_prev
+            a1 = (1.0 + om) ** 2 / (1.0 + 2.0 * om)
+            a2 = om * om / (1.0 + 2.0 * om)
+            beta = (1.0 + om) / (1.0 + 2.0 * om)
+        bdt = beta * dt
+        for i in range(n):
+            hist_h[i] = a1 * h[i] - a2 * h_prev[i]
+        for j in range(n_he):
+            hist_y[j] = a1 * y[j] - a2 * y_prev[j]
+
+        # Newton starts from the linear extrapolation of the temperatures.
+        if n_hist == 0:
+            for i in range(n):
+                temp_new[i] = temp[i]
+        else:
+            om = dt / dt_prev
+            for i in range(n):
+                temp_new[i] = temp[i] + om * (temp[i] - temp_prev[i])
+
+        q = _flux(t_new, q0, slide_s, slide_c, omega, t_exit, q_ext)
+        converged = False
+        for _it in range(12):
+            # Residual R = w (h(T) - hist) - bdt [fluxes + w S(T)]; Jacobian tridiagonal.
+            for i in range(n):
+                if i >= n_target:
+                    h_new[i], dhdt[i] = _he_enthalpy(temp_new[i], rho_c[i], latent_v,
+                                                     melting_point, melt_width)
+                else:
+                    h_new[i] = rho_c[i] * temp_new[i]
+                    dhdt[i] = rho_c[i]
+                resid[i] = width[i] * (h_new[i] - hist_h[i])
+                diag[i] = width[i] * dhdt[i]
+                lower[i] = 0.0
+                upper[i] = 0.0
+            for f in range(n - 1):
+                g = face_conductance[f]
+                flow = g * (temp_new[f + 1] - temp_new[f])      # heat into cell f from f+1
+                resid[f] -= bdt * flow
+                resid[f + 1] += bdt * flow
+                diag[f] += bdt * g
+                upper[f] -= bdt * g
+                diag[f + 1] += bdt * g
+                lower[f + 1] -= bdt * g
+            resid[n_target - 1] -= bdt * (1.0 - q_share_he) * q
+            resid[n_target] -= bdt * q_share_he * q
+            if reactive:
+                for j in range(n_he):
+                    i = n_target + j
+                    if temp_new[i] < t_cold:
+                        continue
+                    k = prefactor * np.exp(-activation_temperature / temp_new[i])
+                    denom = 1.0 + bdt * k
+                    remaining = (1.0 - hist_y[j]) / denom
+                    source = q_v * k * remaining
+                    dsource = source * activation_temperature / (temp_new[i] * temp_new[i] * denom)
+                    resid[i] -= bdt * width[i] * source
+                    diag[i] -= bdt * width[i] * dsource
+            for i in range(n):
+                resid[i] = -resid[i]
+            _solve_tridiagonal(lower, diag, upper, resid, cp, dp, delta)
+            change = 0.0
+            finite = True
+            for i in range(n):
+                temp_new[i] += delta[i]
+                d = abs(delta[i])
+                if not np.isfinite(d) or temp_new[i] <= 0.0:
+                    finite = False
+                if d > change:
+                    change = d
+            if not finite:
+                break
+            if change < newton_tol:
+                converged = True
+                break
+
+        # Final state of the step: enthalpies, fraction reacted, error estimate.
+        err = 0.0
+        t_max = -np.inf
+        y_max = 0.0
+        if converged:
+            for i in range(n):
+                if i >= n_target:
+                    h_new[i], dhdt[i] = _he_enthalpy(temp_new[i], rho_c[i], latent_v,
+                                                     melting_point, melt_width)
+                else:
+                    h_new[i] = rho_c[i] * temp_new[i]
+            for j in range(n_he):
+                i = n_target + j
+                if reactive and temp_new[i] >= t_cold:
+                    k = prefactor * np.exp(-activation_temperature / temp_new[i])
+                    y_new[j] = (hist_y[j] + bdt * k) / (1.0 + bdt * k)
+                else:
+                    y_new[j] = hist_y[j]
+                if temp_new[i] > t_max:
+                    t_max = temp_new[i]
+                if y_new[j] > y_max:
+                    y_max = y_new[j]
+            # Local error: BDF2 corrector minus the quadratic extrapolation through the
+            # last three accepted temperatures (Newton divided differences).
+            if n_hist >= 2:
+                for i in range(n):
+                    d1 = (temp[i] - temp_prev[i]) / dt_prev
+                    d0 = (temp_prev[i] - temp_prev2[i]) / dt_prev2
+                    dd = (d1 - d0) / (dt_prev + dt_prev2)
+                    pred = temp[i] + dt * d1 + dt * (dt + dt_prev) * dd
+                    e = abs(temp_new[i] - pred) * _BDF2_ERROR_CONSTANT
+                    if e > err:
+                        err = e
+            if not np.isfinite(t_max):
+                converged = False
+            if t_max_prev >= t_relax:
+                err = 0.0
+
+        if not converged or err > tol_temperature:
+            rejected += 1
+            if converged:
+                dt *= max(0.2, 0.9 * (tol_temperature / err) ** (1.0 / 3.0))
+            else:
+                dt *= 0.25
+            if dt < 1e-14 * t_end:
+                info[INFO_FAILED] = 1.0
+                break
+            continue
+
+        # Accept the step.
+        steps += 1
+        for i in range(n):
+            temp_prev2[i] = temp_prev[i]
+            temp_prev[i] = temp[i]
+            temp[i] = temp_new[i]
+            h_prev[i] = h[i]
+            h[i] = h_new[i]
+        for j in range(n_he):
+            y_prev[j] = y[j]
+            y[j] = y_new[j]
+        dt_prev2 = dt_prev
+        dt_prev = dt
+        n_hist += 1
+        t_old = t
+        t = t_new
+        if steps <= n_record:
+            record_t[steps - 1] = t
+            record_tb[steps - 1] = ((q + g_t * temp[n_target - 1] + g_h * temp[n_target])
+                                    / (g_t + g_h))
+        if t_max > info[INFO_T_MAX]:
+            info[INFO_T_MAX] = t_max
+        if y_max > info[INFO_Y_MAX]:
+            info[INFO_Y_MAX] = y_max
+        if t_old < t_exit <= t:
+            info[INFO_T_EXIT_MAX] = t_max
+            info[INFO_Y_EXIT_MAX] = y_max
+
+        # Thermal event: report criterion (y > 0.99) or the runaway rule.
+        if y_max > 0.99 or t_max >= t_run:
+            frac = 1.0
+            if y_max > 0.99:
+                if y_max > y_max_prev:
+                    frac = (0.99 - y_max_prev) / (y_max - y_max_prev)
+                t_event = t_old + min(max(frac, 0.0), 1.0) * dt
+            else:
+                if t_max > t_max_prev:
+                    frac = (t_run - t_max_prev) / (t_max - t_max_prev)
+                t_event = t_old + min(max(frac, 0.0), 1.0) * dt + adiabatic_induction_time(
+                    t_run, prefactor, activation_temperature, adiabatic_rise)
+            info[INFO_EVENT] = 1.0
+            info[INFO_T_EVENT] = t_event
+            break
+        t_max_prev = t_max
+        y_max_prev = y_max
+
+        # Next step size from the error estimate (growth capped for smoothness).
+        if n_hist >= 3 and err > 0.0:
+            fac = min(2.0, max(0.2, 0.9 * (tol_temperature / err) ** (1.0 / 3.0)))
+        else:
+            fac = 2.0
+        dt = dt * fac
+        # A jump of the flux at t_exit restarts the multistep history with a small step.
+        if t == t_exit and abs(q_ext - _flux(t_exit * (1.0 - 1e-12), q0, slide_s, slide_c,
+                                             omega, t_exit, q_ext)) > 1e-6 * abs(q0):
+            n_hist = 0
+            dt = dt_initial
+
+    info[INFO_STEPS] = steps
+    info[INFO_REJECTED] = rejected
+    info[INFO_T_FINAL] = t
+    return info
