@@ -92,7 +92,7 @@ def main():
         "| solver's error model ERROR_LEVEL0 * 4^-L | | | "
         + " | ".join(f"{e:.1e}" for e in model_err) + " | 2 |",
         "",
-        "The solver chooses the level from rtol so that the error model is below rtol/2: "
+        "The solver chooses the level from rtol so that the error model is below 0.8 rtol: "
         + ", ".join(f"rtol {r:g} -> level {level_for_rtol(r):g}" for r in (1e-2, 3e-3, 1e-3, 1e-4))
         + ".",
     ]

@@ -45,7 +45,7 @@ def test_presets_table(capsys):
     out = capsys.readouterr().out
     for name in PRESETS:
         assert name in out
-    assert "28000 psi" in out and "530 degR" in out and "TODO-ASSUMPTION" in out
+    assert "28000 psi" in out and "530 degR" in out and "ASSUMPTION: billet mass 25.3 lb" in out
     assert "Pa" in out and "W/(m K)" in out
 
 

@@ -270,10 +270,11 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     newton_tol = 1e-2 * tol_temperature
 
     while t < t_end and steps + rejected < max_steps:
-        # Land exactly on t_exit (flux kink or jump) and on t_end.
-        if t < t_exit and t + dt > t_exit:
+        # Land exactly on t_exit (flux kink or jump) and on t_end, stretching the step
+        # by up to 1 % rather than leaving a sliver of a step before them.
+        if t < t_exit and t + 1.01 * dt > t_exit:
             dt = t_exit - t
-        if t + dt > t_end:
+        if t + 1.01 * dt > t_end:
             dt = t_end - t
         t_new = t + dt
 
@@ -401,7 +402,14 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
             else:
                 dt *= 0.25
             if dt < 1e-14 * t_end:
-                info[INFO_FAILED] = 1.0
+                if t_max_prev >= t_relax:
+                    # Past t_relax the runaway cannot be stopped: the event follows
+                    # within the adiabatic induction time, whatever the integrator does.
+                    info[INFO_EVENT] = 1.0
+                    info[INFO_T_EVENT] = t + adiabatic_induction_time(
+                        t_max_prev, prefactor, activation_temperature, adiabatic_rise)
+                else:
+                    info[INFO_FAILED] = 1.0
                 break
             continue
 

@@ -1,0 +1,138 @@
+"""The critical-height solver: the report's Table VIII, convergence, trends, censoring."""
+
+import math
+
+import pytest
+
+from skidmc.errors import SceneError
+from skidmc.presets import PAPER_TABLE_VIII, get_preset
+from skidmc.scene import make_scene
+from skidmc.solver import ERROR_LEVEL0, critical_height, level_for_rtol
+
+FT = 0.3048
+
+# rtol 1e-2 keeps the default run fast; its error (< 0.8 %) is small against what is tested.
+FAST = 1e-2
+
+
+@pytest.mark.parametrize("row", PAPER_TABLE_VIII, ids=lambda r: r.preset)
+def test_first_series_within_20_percent_of_table_viii(row):
+    # The report omits its mesh, time step and search tolerance, and its explicit
+    # scheme with Eq. (16)'s zero-capacity boundary node differs from ours; two inputs
+    # (the target properties of "85 % alumina", the rounding of I_cg/W = 0.0648) are
+    # also only approximately known. Our converged values sit within 3 % of Table VIII
+    # for quartz, smooth alumina and within 7 % for gold, but 16 % below for rough
+    # alumina (whose report value departs from the mu^-2 scaling its own smooth-alumina
+    # value implies). 20 % is the bound the issue sets for this comparison.
+    res = critical_height(get_preset(row.preset), rtol=FAST)
+    assert res.censored is None
+    assert res.critical_height_ft == pytest.approx(row.calculated_ft, rel=0.20)
+
+
+def test_gold_above_the_tower():
+    # Table II: no event on gold at 25-150 ft; the model must agree (> 150 ft).
+    res = critical_height(get_preset("paper-gold"), rtol=FAST)
+    assert res.critical_height_ft > 150.0
+    assert "stops_sliding" in res.flags
+
+
+@pytest.mark.parametrize("name", ["paper-quartz", "paper-gold"])
+def test_halving_mesh_and_step_changes_less_than_claimed_error(name):
+    # Level L+1 doubles the cells, halves the first cell and the time step.
+    scene = get_preset(name)
+    coarse = critical_height(scene, level=1.0, rtol=1e-5)
+    fine = critical_height(scene, level=2.0, rtol=1e-5)
+    change = abs(fine.critical_height / coarse.critical_height - 1)
+    claimed = ERROR_LEVEL0 * 4.0 ** -1.0
+    assert change < claimed
+    # ... and the change is a real refinement effect, not noise: second order means the
+    # next halving changes the result ~4x less.
+    finer = critical_height(scene, level=3.0, rtol=1e-5)
+    change2 = abs(finer.critical_height / fine.critical_height - 1)
+    assert 2.0 < change / change2 < 8.0
+
+
+def test_runaway_rule_does_not_move_the_height():
+    # The runaway rule stops the run once the adiabatic induction time is below a small
+    # fraction of the contact time. Moving that fraction by 4 decades, or switching the
+    # rule off (the report's criterion alone, y > 0.99), must move H by far less than
+    # the error budget (1e-3): measured 4e-5 between 1e-3 and 0 at level 1.
+    scene = get_preset("paper-quartz")
+    heights = [critical_height(scene, level=1.0, rtol=1e-6, runaway_fraction=f).critical_height
+               for f in (1e-4, 1e-6, 0.0)]
+    assert max(heights) / min(heights) - 1 < 1e-4
+
+
+def test_bisection_reference_agrees_with_brent():
+    scene = get_preset("paper-alumina-smooth")
+    brent = critical_height(scene, rtol=FAST)
+    bisect = critical_height(scene, rtol=FAST, method="bisection")
+    assert bisect.critical_height == pytest.approx(brent.critical_height, rel=FAST)
+    assert brent.evaluations < bisect.evaluations
+
+
+def test_height_falls_as_mu_rises():
+    heights = [critical_height(make_scene(preset="paper-quartz", mu=mu), rtol=FAST).critical_height
+               for mu in (0.06, 0.1, 0.15, 0.25)]
+    assert all(a > b for a, b in zip(heights, heights[1:]))
+
+
+def test_height_rises_with_target_effusivity():
+    base = get_preset("paper-quartz")
+    heights = [critical_height(base.replace({"target.conductivity": k}), rtol=FAST).critical_height
+               for k in (1.0, 2.0, 5.0, 20.0)]
+    assert all(a < b for a, b in zip(heights, heights[1:]))
+
+
+def test_melting_raises_the_height():
+    scene = get_preset("paper-quartz")
+    with_melt = critical_height(scene, rtol=FAST)
+    without = critical_height(scene, rtol=FAST, melting=False)
+    assert "melting" in with_melt.terms and "melting" not in without.terms
+    # 50 cal/g absorbed at 553 K: ~13 % higher critical height.
+    assert with_melt.critical_height > 1.05 * without.critical_height
+
+
+def test_censoring_is_a_result_not_an_error():
+    scene = get_preset("paper-quartz")
+    above = critical_height(scene, rtol=FAST, h_max=0.1)
+    assert above.censored == "above" and above.critical_height == 0.1
+    below = critical_height(scene, rtol=FAST, h_min=2.0)
+    assert below.censored == "below" and below.critical_height == 2.0
+    frictionless = critical_height(make_scene(preset="paper-quartz", mu=0.0))
+    assert frictionless.censored == "above" and frictionless.evaluations == 0
+    assert "no_friction" in frictionless.flags
+
+
+def test_pendulum_has_no_normal_force_moment():
+    quartz = critical_height(get_preset("paper-quartz"), rtol=FAST)
+    gold = critical_height(get_preset("paper-gold"), rtol=FAST)
+    assert "normal_force_spin" not in quartz.terms
+    assert "normal_force_spin" in gold.terms
+
+
+def test_level_for_rtol_meets_error_model():
+    for rtol in (1e-1, 1e-2, 1e-3, 1e-4):
+        level = level_for_rtol(rtol)
+        assert ERROR_LEVEL0 * 4.0 ** -level <= 0.8 * rtol
+        assert level == 0 or ERROR_LEVEL0 * 4.0 ** -(level - 0.5) > 0.8 * rtol
+
+
+@pytest.mark.parametrize("kwargs, key", [
+    ({"tier": "fastest"}, "tier"),
+    ({"rtol": -1.0}, "rtol"),
+    ({"h_min": 10.0, "h_max": 1.0}, "h_min"),
+    ({"method": "newton"}, "method"),
+])
+def test_bad_solver_options_name_the_key(kwargs, key):
+    with pytest.raises(SceneError) as err:
+        critical_height(get_preset("paper-quartz"), **kwargs)
+    assert err.value.key == key
+
+
+def test_result_json_fields():
+    d = critical_height(get_preset("paper-quartz"), rtol=FAST).to_dict()
+    for key in ("critical_height_m", "critical_height_ft", "censored", "evaluations"):
+        assert key in d
+    assert d["critical_height_ft"] == pytest.approx(d["critical_height_m"] / FT)
+    assert math.isfinite(d["error_estimate"])
