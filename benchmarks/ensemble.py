@@ -1,0 +1,179 @@
+"""Ensemble throughput: samples per second for the shipped studies, and the runner's own costs.
+
+Measures, on this machine:
+
+1. For every study in ``studies/``: scene evaluations per second with 1 worker (in process) and
+   with all CPUs (spawned worker processes, their start-up included), and the share of the
+   workers' wall time spent outside the solver,
+   ``1 - sum(per-sample solver wall time) / (wall time x workers)`` (goal: <= 5 %).
+2. Peak memory of a run against n, with the solver replaced by an instant stand-in so that large
+   n are cheap: the runner must not hold all samples to write them, so the peak stays flat.
+
+Writes ``results/benchmarks/ensemble.md`` and ``results/benchmarks/ensemble.csv``.
+
+Usage::
+
+    python benchmarks/ensemble.py                 # every shipped study at its own n
+    python benchmarks/ensemble.py --n 64          # quicker
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from skidmc.runner import _default_workers, execute_study
+from skidmc.study import load_study
+
+OUT = ROOT / "results" / "benchmarks"
+
+# Peak memory of one run in a fresh process, solver stubbed out (see module docstring).
+_MEMORY_PROBE = r"""
+import json, resource, sys, types
+sys.path.insert(0, sys.argv[1])
+import skidmc.solver
+def instant(scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
+    return types.SimpleNamespace(critical_height=0.4 / scene.mu, censored=None, evaluations=1,
+                                 flags=(), wall_time=0.0)
+skidmc.solver.critical_height = instant
+from skidmc.runner import execute_study
+report = execute_study(sys.argv[2], sys.argv[3], n=int(sys.argv[4]), workers=1, progress=False)
+print(json.dumps({"evaluated": report.evaluated, "wall": report.wall_time,
+                  "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def _warm_up() -> None:
+    """Compile (or load) the solver's kernels once, outside the timed runs."""
+    from skidmc.presets import get_preset
+    from skidmc.solver import critical_height
+
+    critical_height(get_preset("paper-quartz"), rtol=1e-2)
+
+
+def throughput(runs, worker_counts, tmp: Path) -> list[dict]:
+    rows = []
+    for path, n in runs:
+        study = load_study(path)
+        for workers in worker_counts:
+            out = tmp / f"{study.name}-{n}-{workers}.h5"
+            report = execute_study(study, out, n=n, workers=workers, progress=False)
+            rows.append({
+                "study": study.name, "design": study.design.method,
+                "scenes": len(study.scenes), "samples_per_scene": report.n_rows,
+                "workers": report.workers, "evaluations": report.evaluated,
+                "wall_s": round(report.wall_time, 3), "solver_s": round(report.solver_time, 3),
+                "evaluations_per_s": round(report.rate, 2),
+                "outside_solver_pct": round(100 * report.outside_solver, 2),
+                "failed": report.status_counts.get("failed", 0),
+            })
+            print(rows[-1], flush=True)
+    return rows
+
+
+def memory(study_path: Path, ns, tmp: Path) -> list[dict]:
+    rows = []
+    for n in ns:
+        out = tmp / f"memory-{n}.h5"
+        res = subprocess.run([sys.executable, "-c", _MEMORY_PROBE, str(ROOT / "src"),
+                              str(study_path), str(out), str(n)],
+                             capture_output=True, text=True, check=True)
+        probe = json.loads(res.stdout.strip().splitlines()[-1])
+        rows.append({"study": load_study(study_path).name, "samples_per_scene": n,
+                     "evaluations": probe["evaluated"],
+                     "peak_rss_mib": round(probe["peak_rss_mib"], 1),
+                     "file_mib": round(out.stat().st_size / 2**20, 2)})
+        print(rows[-1], flush=True)
+    return rows
+
+
+def write(rows: list[dict], mem: list[dict], load: tuple[float, ...]) -> None:
+    OUT.mkdir(parents=True, exist_ok=True)
+    with open(OUT / "ensemble.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    cpu = platform.processor() or platform.machine()
+    lines = [
+        "# Ensemble throughput (benchmarks/ensemble.py)",
+        "",
+        (f"Machine: {os.cpu_count()} CPUs ({cpu}), Python {platform.python_version()}, "
+         f"{platform.system()}. An evaluation is one scene at one sample (one critical-height "
+         "search at the study's rtol). Wall time covers the whole evaluation loop: sampling, "
+         "worker start-up (spawned processes load the compiled kernels from numba's cache), "
+         "scene building, solver, writing each chunk. Starting the worker processes (about "
+         "1 s each: imports and loading the kernels) is a fixed cost, so the outside-solver "
+         "share of a multi-worker run falls as n grows (the last rows: a longer run)."),
+        "",
+        (f"Load average before the runs (1, 5, 15 min): {load[0]:.2f}, {load[1]:.2f}, "
+         f"{load[2]:.2f}; other work on the machine slows the solver itself, which the "
+         "outside-solver share does not see but the evaluations/s do."),
+        "",
+        ("outside solver = 1 - sum(per-sample solver wall time) / (wall time x workers): the "
+         "share of the workers' time not spent in `critical_height` (goal <= 5 %)."),
+        "",
+        ("| study | design | scenes | samples/scene | workers | evaluations | wall [s] "
+         "| evaluations/s | outside solver [%] | failed |"),
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(f"| {r['study']} | {r['design']} | {r['scenes']} | {r['samples_per_scene']} "
+                     f"| {r['workers']} | {r['evaluations']} | {r['wall_s']:.1f} "
+                     f"| {r['evaluations_per_s']:.1f} | {r['outside_solver_pct']:.1f} "
+                     f"| {r['failed']} |")
+    lines += [
+        "",
+        "## Peak memory against n",
+        "",
+        ("Solver replaced by an instant stand-in, 1 worker, a fresh process per n: the runner's "
+         "and the storage's own memory. Results go to disk chunk by chunk, so the peak should "
+         "not grow with n (the lhs design itself, n x d floats, is the only O(n) array)."),
+        "",
+        "| study | samples/scene | evaluations | peak RSS [MiB] | file [MiB] |",
+        "|---|---|---|---|---|",
+    ]
+    for r in mem:
+        lines.append(f"| {r['study']} | {r['samples_per_scene']} | {r['evaluations']} "
+                     f"| {r['peak_rss_mib']} | {r['file_mib']} |")
+    (OUT / "ensemble.md").write_text("\n".join(lines) + "\n")
+    with open(OUT / "ensemble_memory.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(mem[0]))
+        writer.writeheader()
+        writer.writerows(mem)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, help="samples per scene (default: each study's)")
+    parser.add_argument("--long-n", type=int, default=1024,
+                        help="samples per scene of one longer run of the first study, where "
+                        "the workers' start-up weighs less (0: skip)")
+    parser.add_argument("--memory-n", type=int, nargs="+", default=[1000, 4000, 16000],
+                        help="sample counts of the memory probe")
+    args = parser.parse_args(argv)
+    studies = sorted((ROOT / "studies").glob("*.toml"))
+    worker_counts = sorted({1, _default_workers()})
+    _warm_up()
+    load = os.getloadavg()
+    with tempfile.TemporaryDirectory() as tmp:
+        runs = [(path, args.n) for path in studies]
+        if args.long_n:
+            runs.append((studies[0], args.long_n))
+        rows = throughput(runs, worker_counts, Path(tmp))
+        mem = memory(ROOT / "studies" / "paper-series1.toml", args.memory_n, Path(tmp))
+    write(rows, mem, load)
+    print(f"wrote {OUT / 'ensemble.md'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,249 @@
+"""Designs on the unit hypercube and their map to scene inputs.
+
+Reproducibility is by construction: every random stream comes from one
+:class:`numpy.random.SeedSequence` per study seed, keyed by what is drawn, never by who draws it.
+
+* ``mc``: independent uniforms in fixed blocks of :data:`MC_BLOCK` samples; block b uses the
+  stream ``SeedSequence(seed, spawn_key=(STREAM_MC, b))``. Sample i is therefore the same for
+  any worker count, chunk size or sample count n (a larger n only appends samples).
+* ``lhs``: :class:`scipy.stats.qmc.LatinHypercube` over the whole study, drawn once up front
+  (stratification needs n); it holds n x d floats in memory.
+* ``sobol``: scrambled :class:`scipy.stats.qmc.Sobol`; any slice is computed on its own with
+  ``fast_forward`` and equals the same rows of the full sequence, and the first n points of a
+  larger n are the same.
+* ``saltelli``: SALib's Saltelli/Sobol' design (:func:`SALib.sample.sobol.sample`, scrambled),
+  N (2d + 2) rows (or N (d + 2) without second order), drawn once up front, with the column
+  order of :attr:`skidmc.study.Study.keys` (the ``problem`` of :func:`salib_problem`).
+
+A design row u in [0, 1)^d becomes inputs in three steps (:func:`transform`): the Gaussian
+copula of the study's correlations (normal scores z = Phi^-1(u) mixed by the Cholesky factor of
+the correlation matrix, back through Phi), truncation to [U_TAIL, 1 - U_TAIL] (the quantiles the
+study checked against the physical range), and each distribution's ``ppf`` (times the scene's
+nominal value for relative distributions). A sampled rate at the reference temperature gives the
+prefactor Z = k_ref exp(E/R / T_ref) with the sample's own E/R. Every step acts row by row, with
+no reduction across rows, so a row's inputs do not depend on which other rows share its batch.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+from scipy.special import ndtr, ndtri
+from scipy.stats import qmc
+
+from skidmc.study import RATE_AT_REFERENCE, U_TAIL, Study
+
+__all__ = [
+    "MC_BLOCK",
+    "StudySampler",
+    "UniformDesign",
+    "salib_problem",
+    "seed_sequence",
+    "transform",
+]
+
+#: Samples per independent random stream of the ``mc`` design. Fixed: changing it changes every
+#: ``mc`` result, so it is part of the file format (recorded in the result's attributes).
+MC_BLOCK = 1024
+
+# spawn_key roots of the streams, one per use of the seed.
+STREAM_MC, STREAM_LHS, STREAM_SOBOL, STREAM_SALTELLI = 0, 1, 2, 3
+
+
+def seed_sequence(seed: int, *stream: int) -> np.random.SeedSequence:
+    """The study's seed normaliser: the SeedSequence of `seed` for the stream `stream`.
+
+    Parameters
+    ----------
+    seed : int
+        Study seed, an integer >= 0 (0 is a seed like any other).
+    *stream : int
+        Stream key, e.g. ``(STREAM_MC, block)``; equal to spawning children in that order.
+
+    Returns
+    -------
+    numpy.random.SeedSequence
+
+    Raises
+    ------
+    ValueError
+        `seed` is not an integer >= 0 (None is refused: a study must be reproducible).
+    """
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise ValueError(f"seed = {seed!r}: expected an integer >= 0")
+    return np.random.SeedSequence(int(seed), spawn_key=tuple(int(s) for s in stream))
+
+
+def _qmc_engine(cls, d: int, rng: np.random.Generator):
+    """A scrambled scipy.stats.qmc engine driven by `rng`."""
+    try:
+        return cls(d, scramble=True, rng=rng)
+    except TypeError:  # scipy < 1.15 calls the same argument `seed`
+        return cls(d, scramble=True, seed=rng)
+
+
+class UniformDesign:
+    """Rows of a design on [0, 1)^d, computed slice by slice.
+
+    Parameters
+    ----------
+    method : {"mc", "lhs", "sobol", "saltelli"}
+    n : int
+        Samples (``saltelli``: base samples N).
+    d : int
+        Dimension (number of uncertain inputs).
+    seed : int
+        Study seed.
+    second_order : bool
+        ``saltelli`` only.
+
+    Attributes
+    ----------
+    n_rows : int
+        Number of rows of the whole design.
+    """
+
+    def __init__(self, method: str, n: int, d: int, seed: int, second_order: bool = True):
+        if method not in ("mc", "lhs", "sobol", "saltelli"):
+            raise ValueError(f"method = {method!r}: expected mc, lhs, sobol or saltelli")
+        self.method, self.n, self.d, self.seed = method, int(n), int(d), seed
+        self.second_order = bool(second_order)
+        seed_sequence(seed)  # validate early
+        if method == "saltelli":
+            self.n_rows = self.n * (2 * self.d + 2 if self.second_order else self.d + 2)
+        else:
+            self.n_rows = self.n
+        self._full: np.ndarray | None = None  # lhs, saltelli: drawn once
+        self._block: tuple[int, np.ndarray] | None = None  # mc: last block generated
+
+    def _rng(self, *stream: int) -> np.random.Generator:
+        return np.random.default_rng(seed_sequence(self.seed, *stream))
+
+    def rows(self, start: int, stop: int) -> np.ndarray:
+        """Rows ``start:stop`` of the design, shape (stop - start, d), values in [0, 1)."""
+        if not 0 <= start <= stop <= self.n_rows:
+            raise IndexError(f"rows {start}:{stop} outside the design's 0:{self.n_rows}")
+        if self.method == "mc":
+            return self._mc_rows(start, stop)
+        if self.method == "sobol":
+            engine = _qmc_engine(qmc.Sobol, self.d, self._rng(STREAM_SOBOL))
+            if start:
+                engine.fast_forward(start)
+            return engine.random(stop - start)
+        if self._full is None:
+            self._full = self._draw_full()
+        return self._full[start:stop]
+
+    def _mc_rows(self, start: int, stop: int) -> np.ndarray:
+        out = np.empty((stop - start, self.d))
+        i = start
+        while i < stop:
+            b = i // MC_BLOCK
+            if self._block is None or self._block[0] != b:
+                self._block = (b, self._rng(STREAM_MC, b).random((MC_BLOCK, self.d)))
+            j = min(stop, (b + 1) * MC_BLOCK)
+            out[i - start:j - start] = self._block[1][i - b * MC_BLOCK:j - b * MC_BLOCK]
+            i = j
+        return out
+
+    def _draw_full(self) -> np.ndarray:
+        if self.method == "lhs":
+            return _qmc_engine(qmc.LatinHypercube, self.d, self._rng(STREAM_LHS)).random(self.n)
+        from SALib.sample import sobol as saltelli_sample
+
+        problem = {"num_vars": self.d, "names": [f"x{i}" for i in range(self.d)],
+                   "bounds": [[0.0, 1.0]] * self.d}
+        return saltelli_sample.sample(problem, self.n, calc_second_order=self.second_order,
+                                      scramble=True, seed=self._rng(STREAM_SALTELLI))
+
+
+def salib_problem(study: Study) -> dict:
+    """SALib ``problem`` dict of a study's design columns (for ``SALib.analyze.sobol``)."""
+    return {"num_vars": len(study.keys), "names": list(study.keys),
+            "bounds": [[0.0, 1.0]] * len(study.keys)}
+
+
+class StudySampler:
+    """Draws a study's inputs slice by slice.
+
+    Parameters
+    ----------
+    study : Study
+        A validated study; its design gives method, n and seed.
+
+    Attributes
+    ----------
+    design : UniformDesign
+    n_rows : int
+        Samples per scene.
+    """
+
+    def __init__(self, study: Study) -> None:
+        self.study = study
+        spec = study.design
+        self.design = UniformDesign(spec.method, spec.n, len(study.keys), spec.seed,
+                                    spec.second_order)
+        self.n_rows = self.design.n_rows
+
+    def draw(self, start: int, stop: int) -> list[dict[str, np.ndarray]]:
+        """Inputs of samples ``start:stop`` for every scene (see :func:`transform`)."""
+        return transform(self.study, self.design.rows(start, stop))
+
+
+def _copula(study: Study, u: np.ndarray) -> np.ndarray:
+    """Impose the study's Gaussian-copula correlations on uniform columns, row by row."""
+    if not study.correlations:
+        return u
+    names = sorted({k for c in study.correlations for k in c.keys},
+                   key=study.keys.index)
+    cols = [study.keys.index(k) for k in names]
+    r = np.eye(len(names))
+    for c in study.correlations:
+        a, b = names.index(c.keys[0]), names.index(c.keys[1])
+        r[a, b] = r[b, a] = c.rho
+    chol = np.linalg.cholesky(r)
+    z = ndtri(u[:, cols])
+    out = u.copy()
+    for j, col in enumerate(cols):
+        # An explicit sum rather than z @ chol.T: BLAS may order a matrix product's sums by the
+        # batch's shape, and a sample must not depend on which batch it travels in.
+        zj = chol[j, 0] * z[:, 0]
+        for k in range(1, j + 1):
+            zj = zj + chol[j, k] * z[:, k]
+        out[:, col] = ndtr(zj)
+    return out
+
+
+def transform(study: Study, u: np.ndarray) -> list[dict[str, np.ndarray]]:
+    """Map design rows to the inputs of every scene of a study.
+
+    Parameters
+    ----------
+    study : Study
+    u : ndarray, shape (m, d)
+        Rows in [0, 1]^d, columns in the order of ``study.keys`` (a caller with its own points,
+        e.g. an adaptive rare-event method, may pass any rows here).
+
+    Returns
+    -------
+    list of dict
+        One dict per scene (``study.scenes`` order): key -> values, shape (m,), in SI units, for
+        every uncertain key of the scene; with :data:`~skidmc.study.RATE_AT_REFERENCE` also the
+        derived ``kinetics.prefactor`` [1/s].
+    """
+    u = np.atleast_2d(np.asarray(u, dtype=float))
+    if u.shape[1] != len(study.keys):
+        raise ValueError(f"u has {u.shape[1]} columns, the study {len(study.keys)} keys")
+    u = np.clip(_copula(study, u), U_TAIL, 1.0 - U_TAIL)
+    out = []
+    for sc in study.scenes:
+        values = {key: dist.ppf(u[:, study.keys.index(key)], sc.nominal(key))
+                  for key, dist in sc.uncertain.items()}
+        if RATE_AT_REFERENCE in values:
+            t_act = values.get("kinetics.activation_temperature",
+                               sc.nominal("kinetics.activation_temperature"))
+            t_ref = sc.uncertain[RATE_AT_REFERENCE].reference_temperature
+            values["kinetics.prefactor"] = values[RATE_AT_REFERENCE] * np.exp(t_act / t_ref)
+        out.append(values)
+    return out

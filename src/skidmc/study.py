@@ -1,0 +1,886 @@
+"""Study files: one user's question, declared once in TOML and validated on load.
+
+A study names the scene(s), the uncertain inputs with their distributions, the design and the
+solver settings; :func:`load_study` turns it into a :class:`Study` and rejects anything it cannot
+run with a :class:`StudyError` naming the file, the key and the value. The format::
+
+    [study]
+    name = "paper-quartz-mu"            # results go to results/<name>/ensemble.h5
+    description = "..."
+
+    [scene]                             # one scene: a preset plus overrides (units allowed) ...
+    preset = "paper-quartz"
+    flow_stress = "30000 psi"
+
+    # [[scenes]]                        # ... or several named scenes (storage dimension `scene`)
+    # name = "gold"
+    # preset = "paper-gold"
+    # [scenes.uncertain."target.conductivity"]   # a distribution for this scene only
+    # ...
+
+    [uncertain.mu]                      # any numeric scene key
+    distribution = "lognorm"            # a scipy.stats continuous distribution, by its name
+    s = 0.2                             # scipy's parameter names (shapes, loc, scale)
+    relative = true                     # the distribution is of a factor on each scene's value
+    source = "report Sec. IV: least reproducible input"   # mandatory
+
+    [uncertain."kinetics.activation_temperature"]
+    distribution = "uniform"
+    loc = "15000 K"                     # values with units where the key has units
+    scale = "19000 K"
+    source = "..."
+
+    [uncertain."kinetics.rate_at_reference"]    # samples Z through the rate at T_ref:
+    distribution = "lognorm"                    # Z = k_ref exp(E/R / T_ref)
+    s = 1.0
+    scale = "1 1/s"
+    reference_temperature = "580 K"
+    source = "..."
+
+    [[correlation]]                     # Gaussian copula between two uncertain inputs
+    keys = ["kinetics.activation_temperature", "kinetics.prefactor"]
+    spearman = 0.9                      # rank correlation (or `gaussian`: the copula's own rho)
+    source = "..."
+
+    [design]
+    method = "lhs"                      # mc | lhs | sobol | saltelli
+    n = 256                             # samples (saltelli: base samples N, N (2d + 2) rows)
+    seed = 20240601
+
+    [solver]                            # skidmc.solver.critical_height arguments
+    rtol = 1e-2
+    tier = "full"
+    h_min = "1 mm"
+    h_max = "10 km"
+
+Physical bounds are checked at load: every distribution's 1e-9 and 1 - 1e-9 quantiles, for every
+scene it applies to, must be valid scene values (the scene layer's ranges, and a friction
+coefficient in (0, 1)); the sampling then never leaves those quantiles
+(:data:`U_TAIL`), so no sample can fall outside the range that was checked.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import hashlib
+import math
+import numbers
+import re
+from collections.abc import Mapping
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import scipy.stats
+
+from skidmc.errors import SceneError, SkidmcError
+from skidmc.scene import SCENE_KEYS, SI_UNITS, Scene, make_scene
+from skidmc.units import to_si
+
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10: the same parser, packaged as tomli
+    import tomli as tomllib
+
+__all__ = [
+    "DESIGN_METHODS",
+    "EXTRA_KEYS",
+    "RATE_AT_REFERENCE",
+    "Correlation",
+    "DesignSpec",
+    "Distribution",
+    "SolverOptions",
+    "Study",
+    "StudyError",
+    "StudyScene",
+    "load_study",
+    "parse_study",
+]
+
+#: Design methods (:mod:`skidmc.sampling`).
+DESIGN_METHODS: tuple[str, ...] = ("mc", "lhs", "sobol", "saltelli")
+
+#: Pseudo-key sampled instead of ``kinetics.prefactor``: the Arrhenius rate at a reference
+#: temperature, k_ref = Z exp(-E/R / T_ref) [1/s] (physics notes sec. 5, compensation effect).
+RATE_AT_REFERENCE = "kinetics.rate_at_reference"
+
+#: Sampled keys that are not scene keys: key -> (SI unit, long name).
+EXTRA_KEYS: dict[str, tuple[str, str]] = {
+    RATE_AT_REFERENCE: (
+        "1/s",
+        "Arrhenius rate constant at the reference temperature, Z exp(-E/R / T_ref)",
+    ),
+}
+
+#: Tail quantile at which distributions are checked against the physical range, and at which
+#: the sampling truncates the design (so that the check covers every sample) [1].
+U_TAIL = 1e-9
+
+# Study-level physical ranges stricter than the scene layer's: a friction coefficient that a
+# distribution may reach (the scene accepts up to 5 to catch typos, not as physics).
+_STUDY_RANGES: dict[str, tuple[float, float]] = {"mu": (0.0, 1.0)}
+
+_TOP_LEVEL = ("study", "scene", "scenes", "uncertain", "correlation", "design", "solver")
+_STUDY_KEYS = ("name", "description")
+_SCENE_RESERVED = ("name", "preset", "uncertain")
+_DIST_META = ("distribution", "source", "relative", "reference_temperature")
+_DESIGN_KEYS = ("method", "n", "seed", "second_order")
+_SOLVER_KEYS = ("rtol", "tier", "h_min", "h_max")
+_CORRELATION_KEYS = ("keys", "spearman", "gaussian", "source")
+_NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+# "<number> <unit>": to convert a spread (a temperature difference) separately from a level.
+_NUMBER_THEN_UNIT = re.compile(r"^\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\s*(?P<unit>.*?)\s*$")
+_NO_VALUE = object()
+
+
+class StudyError(SkidmcError, ValueError):
+    """A study file that cannot be run: the message names the file, the key and the value.
+
+    Parameters
+    ----------
+    file : str
+        The study file (or ``"<string>"`` for text parsed directly).
+    key : str
+        Where in the file, TOML-style (``uncertain."he.conductivity".scale``).
+    value : object
+        The value as written in the file; ``None`` when the key is missing.
+    reason : str
+        What is wrong, phrased as the rule it breaks, with a hint where one helps.
+
+    Attributes
+    ----------
+    file, key, value, reason
+        As given; ``str(err)`` is ``"{file}: {key} = {value!r}: {reason}"``.
+    """
+
+    def __init__(self, file: str, key: str, value: object, reason: str) -> None:
+        self.file = str(file)
+        self.key = key
+        self.value = value
+        self.reason = reason
+        shown = f"{key}" if value is None else f"{key} = {value!r}"
+        super().__init__(f"{self.file}: {shown}: {reason}")
+
+    def __reduce__(self):
+        return (type(self), (self.file, self.key, self.value, self.reason))
+
+
+def _toml_key(*parts: str | int) -> str:
+    """Dotted TOML path for messages; parts holding a dot are quoted (``uncertain."he.k"``)."""
+    out = []
+    for part in parts:
+        if isinstance(part, int):
+            out[-1] += f"[{part}]"
+        elif re.fullmatch(r"[A-Za-z0-9_-]+", part):
+            out.append(part)
+        else:
+            out.append(f'"{part}"')
+    return ".".join(out)
+
+
+def _suggest(word: str, options) -> str:
+    close = difflib.get_close_matches(word, list(options), n=3, cutoff=0.6)
+    if close:
+        return "did you mean " + " or ".join(repr(c) for c in close) + "?"
+    return "expected one of " + ", ".join(repr(o) for o in options)
+
+
+# --- the parts of a study -----------------------------------------------------------------------
+
+
+@dataclasses.dataclass(frozen=True)
+class Distribution:
+    """The distribution of one uncertain input.
+
+    Attributes
+    ----------
+    key : str
+        Scene key, or :data:`RATE_AT_REFERENCE`.
+    name : str
+        Name of a :mod:`scipy.stats` continuous distribution (``"truncnorm"``).
+    params : tuple of (str, float)
+        scipy's parameters (shapes, ``loc``, ``scale``) in the key's SI unit, or of the factor
+        when `relative`.
+    source : str
+        Where the width comes from.
+    relative : bool
+        The distribution is of a dimensionless factor on the scene's nominal value.
+    reference_temperature : float or None
+        T_ref for :data:`RATE_AT_REFERENCE` [K].
+    """
+
+    key: str
+    name: str
+    params: tuple[tuple[str, float], ...]
+    source: str
+    relative: bool = False
+    reference_temperature: float | None = None
+
+    @cached_property
+    def frozen(self):
+        """The frozen :mod:`scipy.stats` distribution."""
+        return getattr(scipy.stats, self.name)(**dict(self.params))
+
+    def ppf(self, u: np.ndarray, nominal: float = 1.0) -> np.ndarray:
+        """Values at the quantiles `u`; times `nominal` when relative [SI unit of the key]."""
+        x = self.frozen.ppf(u)
+        return x * nominal if self.relative else x
+
+    def describe(self) -> str:
+        """``"lognorm(s=0.2) x nominal"``-style one-liner."""
+        args = ", ".join(f"{k}={v:.6g}" for k, v in self.params)
+        return f"{self.name}({args})" + (" x nominal" if self.relative else "")
+
+
+@dataclasses.dataclass(frozen=True)
+class Correlation:
+    """A Gaussian-copula correlation between two uncertain inputs.
+
+    Attributes
+    ----------
+    keys : tuple of str
+        The two keys.
+    rho : float
+        Correlation of the copula's normal scores [1].
+    spearman : float or None
+        The rank correlation it was given as, if so [1]; rho = 2 sin(pi rs / 6).
+    source : str
+        Where it comes from.
+    """
+
+    keys: tuple[str, str]
+    rho: float
+    spearman: float | None
+    source: str
+
+
+@dataclasses.dataclass(frozen=True)
+class DesignSpec:
+    """How the samples are drawn (:mod:`skidmc.sampling`).
+
+    Attributes
+    ----------
+    method : {"mc", "lhs", "sobol", "saltelli"}
+    n : int
+        Number of samples; for ``saltelli`` the base sample count N.
+    seed : int
+        Seed of :class:`numpy.random.SeedSequence` (>= 0).
+    second_order : bool
+        ``saltelli`` only: rows for second-order indices too.
+    """
+
+    method: str
+    n: int
+    seed: int
+    second_order: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverOptions:
+    """Arguments of :func:`skidmc.solver.critical_height` for every sample.
+
+    Attributes
+    ----------
+    rtol : float
+        Relative tolerance on the critical height [1].
+    tier : str
+        Model fidelity tier.
+    h_min, h_max : float
+        Search bounds [m]; results beyond them are censored.
+    """
+
+    rtol: float = 1e-3
+    tier: str = "full"
+    h_min: float = 1e-3
+    h_max: float = 1e4
+
+    def as_kwargs(self) -> dict:
+        """Keyword arguments for :func:`skidmc.solver.critical_height`."""
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass(frozen=True)
+class StudyScene:
+    """One scene of a study with the distributions that apply to it.
+
+    Attributes
+    ----------
+    name : str
+        Scene name (the preset name for a single ``[scene]`` without one).
+    scene : Scene
+        The nominal scene.
+    uncertain : dict
+        Key -> :class:`Distribution` (study-wide ones, overridden by the scene's own).
+    """
+
+    name: str
+    scene: Scene
+    uncertain: Mapping[str, Distribution]
+
+    def nominal(self, key: str) -> float:
+        """The scene's value of `key` [SI]; for :data:`RATE_AT_REFERENCE`, k(T_ref) of the scene."""
+        values = self.scene.as_dict()
+        if key == RATE_AT_REFERENCE:
+            t_ref = self.uncertain[key].reference_temperature
+            return values["kinetics.prefactor"] * math.exp(
+                -values["kinetics.activation_temperature"] / t_ref
+            )
+        return values[key]
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    """A validated study (build with :func:`load_study` or :func:`parse_study`).
+
+    Attributes
+    ----------
+    name, description : str
+    scenes : tuple of StudyScene
+    scene_dimension : bool
+        True for ``[[scenes]]`` (storage gets a ``scene`` dimension), False for ``[scene]``.
+    keys : tuple of str
+        The uncertain keys in design-column order (all scenes together).
+    correlations : tuple of Correlation
+    design : DesignSpec
+    solver : SolverOptions
+    text : str
+        The study file's full text.
+    sha256 : str
+        Hex digest of `text` (UTF-8), identifies the study in result files.
+    file : str
+        Where it was read from (``"<string>"`` if parsed from text).
+    """
+
+    name: str
+    description: str
+    scenes: tuple[StudyScene, ...]
+    scene_dimension: bool
+    keys: tuple[str, ...]
+    correlations: tuple[Correlation, ...]
+    design: DesignSpec
+    solver: SolverOptions
+    text: str
+    sha256: str
+    file: str
+
+    @property
+    def scene_names(self) -> tuple[str, ...]:
+        """Names of the scenes, in order."""
+        return tuple(s.name for s in self.scenes)
+
+    @property
+    def n_rows(self) -> int:
+        """Number of samples per scene in the design (``saltelli``: N (2d + 2) or N (d + 2))."""
+        d = self.design
+        if d.method == "saltelli":
+            return d.n * (2 * len(self.keys) + 2 if d.second_order else len(self.keys) + 2)
+        return d.n
+
+    def with_n(self, n: int) -> Study:
+        """The same study with another sample count, validated as if written in the file.
+
+        Raises
+        ------
+        StudyError
+            `n` is not a valid count for the design (e.g. not a power of 2 for ``sobol``).
+        """
+        _check_n(self.file, self.design.method, n, key="n (--n)")
+        return dataclasses.replace(self, design=dataclasses.replace(self.design, n=int(n)))
+
+
+# --- loading --------------------------------------------------------------------------------------
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and validate a study file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A TOML study file.
+
+    Returns
+    -------
+    Study
+
+    Raises
+    ------
+    StudyError
+        The file cannot be read, is not valid TOML, or breaks a rule of the format.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise StudyError(str(path), "(file)", None, f"cannot read: {exc}") from None
+    return parse_study(text, file=str(path))
+
+
+def parse_study(text: str, file: str = "<string>") -> Study:
+    """Validate the text of a study file (see the module docstring for the format).
+
+    Parameters
+    ----------
+    text : str
+        TOML text.
+    file : str
+        Name used in error messages and recorded in results.
+
+    Returns
+    -------
+    Study
+
+    Raises
+    ------
+    StudyError
+        On the first rule the study breaks.
+    """
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise StudyError(file, "(syntax)", None, f"not valid TOML: {exc}") from None
+    return _Parser(file, doc).study(text)
+
+
+class _Parser:
+    """Walks the TOML document; each method raises StudyError at the first problem."""
+
+    def __init__(self, file: str, doc: dict) -> None:
+        self.file = file
+        self.doc = doc
+
+    def error(self, key: str, value: object, reason: str) -> StudyError:
+        return StudyError(self.file, key, value, reason)
+
+    def unknown_keys(self, table: Mapping, allowed, *where: str | int) -> None:
+        for name, value in table.items():
+            if name not in allowed:
+                raise self.error(_toml_key(*where, name), value, "unknown key; " +
+                                 _suggest(name, allowed))
+
+    def table(self, value: object, *where: str | int) -> dict:
+        if not isinstance(value, dict):
+            raise self.error(_toml_key(*where), value, "expected a table")
+        return value
+
+    def string(self, table: Mapping, name: str, *where: str | int, required=True,
+               default: str = "") -> str:
+        if name not in table:
+            if required:
+                raise self.error(_toml_key(*where, name), None, "missing")
+            return default
+        value = table[name]
+        if not isinstance(value, str):
+            raise self.error(_toml_key(*where, name), value, "expected a string")
+        return value
+
+    # -- the whole document
+
+    def study(self, text: str) -> Study:
+        doc = self.doc
+        self.unknown_keys(doc, _TOP_LEVEL)
+        if "study" not in doc:
+            raise self.error("study", None, "missing table [study] (with at least `name`)")
+        head = self.table(doc["study"], "study")
+        self.unknown_keys(head, _STUDY_KEYS, "study")
+        name = self.string(head, "name", "study")
+        if not _NAME_PATTERN.match(name):
+            raise self.error("study.name", name, "must be letters, digits, '.', '_' or '-' "
+                             "(it names the results folder)")
+        description = self.string(head, "description", "study", required=False)
+
+        common = self.uncertain(doc.get("uncertain", {}), "uncertain")
+        scenes, scene_dimension = self.scenes(common)
+        keys: list[str] = []
+        for sc in scenes:
+            keys += [k for k in sc.uncertain if k not in keys]
+        if not keys:
+            raise self.error("uncertain", None, "no uncertain inputs: give at least one "
+                             "[uncertain.KEY] table (use `skidmc height` for a single scene)")
+        design = self.design(doc.get("design"))
+        correlations = self.correlations(doc.get("correlation", []), scenes)
+        if correlations and design.method == "saltelli":
+            raise self.error("correlation", [list(c.keys) for c in correlations],
+                             "the saltelli design needs independent inputs (Sobol indices are "
+                             "defined for them); sample kinetics.rate_at_reference instead of "
+                             "correlating the kinetics pair, or use mc/lhs/sobol")
+        solver = self.solver(doc.get("solver", {}))
+        return Study(
+            name=name, description=description, scenes=scenes,
+            scene_dimension=scene_dimension, keys=tuple(keys), correlations=correlations,
+            design=design, solver=solver, text=text,
+            sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), file=self.file,
+        )
+
+    # -- scenes
+
+    def scenes(self, common: dict[str, Distribution]) -> tuple[tuple[StudyScene, ...], bool]:
+        doc = self.doc
+        if "scene" in doc and "scenes" in doc:
+            raise self.error("scenes", None, "give either one [scene] or several [[scenes]], "
+                             "not both")
+        if "scene" in doc:
+            table = self.table(doc["scene"], "scene")
+            return (self.one_scene(table, common, ("scene",), name_required=False),), False
+        if "scenes" in doc:
+            entries = doc["scenes"]
+            if not isinstance(entries, list) or not entries:
+                raise self.error("scenes", entries, "expected one or more [[scenes]] tables")
+            out: list[StudyScene] = []
+            for i, entry in enumerate(entries):
+                table = self.table(entry, "scenes", i)
+                sc = self.one_scene(table, common, ("scenes", i), name_required=True)
+                if sc.name in [o.name for o in out]:
+                    raise self.error(_toml_key("scenes", i, "name"), sc.name,
+                                     "duplicate scene name")
+                out.append(sc)
+            return tuple(out), True
+        raise self.error("scene", None, "missing: give a [scene] table (a preset plus "
+                         "overrides) or several [[scenes]]")
+
+    def one_scene(self, table: dict, common: dict[str, Distribution],
+                  where: tuple, name_required: bool) -> StudyScene:
+        name = self.string(table, "name", *where, required=name_required)
+        preset = table.get("preset")
+        if preset is not None and not isinstance(preset, str):
+            raise self.error(_toml_key(*where, "preset"), preset, "expected a preset name")
+        if name and not _NAME_PATTERN.match(name):
+            raise self.error(_toml_key(*where, "name"), name,
+                             "must be letters, digits, '.', '_' or '-'")
+        overrides = {k: v for k, v in table.items() if k not in _SCENE_RESERVED}
+        try:
+            scene = make_scene(overrides, preset=preset)
+        except SceneError as exc:  # exc.key is "preset" for an unknown preset
+            raise self.error(_toml_key(*where, exc.key), exc.value, exc.reason) from None
+        own = self.uncertain(table.get("uncertain", {}), *where, "uncertain")
+        uncertain = {**common, **own}
+        if RATE_AT_REFERENCE in uncertain and "kinetics.prefactor" in uncertain:
+            raise self.error(_toml_key(*where, "uncertain"), None,
+                             "kinetics.prefactor and kinetics.rate_at_reference are both "
+                             "uncertain in this scene (one study-wide, one its own): keep one")
+        sc = StudyScene(name=name or preset or "scene", scene=scene, uncertain=uncertain)
+        self.check_rate_reference(sc)  # first: a bad T_ref also spoils the rate's support
+        for key, dist in uncertain.items():
+            origin = (*where, "uncertain", key) if key in own else ("uncertain", key)
+            self.check_support(sc, dist, origin)
+        return sc
+
+    # -- distributions
+
+    def uncertain(self, table: object, *where: str | int) -> dict[str, Distribution]:
+        table = self.table(table, *where)
+        specs: dict[str, tuple[dict, tuple]] = {}
+
+        def walk(node: dict, prefix: tuple[str, ...]) -> None:
+            for name, value in node.items():
+                path = (*prefix, name)
+                if not isinstance(value, dict):
+                    raise self.error(_toml_key(*where, *path), value,
+                                     "expected a table with a `distribution`")
+                if any(not isinstance(v, dict) for v in value.values()) or not value:
+                    specs[".".join(path)] = (value, (*where, ".".join(path)))
+                else:
+                    walk(value, path)
+
+        walk(table, ())
+        out = {}
+        for key, (spec, at) in specs.items():
+            if key == "configuration":
+                raise self.error(_toml_key(*at), spec, "configuration is a choice, not a "
+                                 "number: run one scene per configuration ([[scenes]])")
+            if key not in SI_UNITS and key not in EXTRA_KEYS:
+                raise self.error(_toml_key(*at), spec, "not a scene key; " +
+                                 _suggest(key, [*SCENE_KEYS, *EXTRA_KEYS]))
+            out[key] = self.distribution(key, spec, at)
+        if RATE_AT_REFERENCE in out and "kinetics.prefactor" in out:
+            raise self.error(_toml_key(*where, RATE_AT_REFERENCE), None,
+                             "kinetics.prefactor is sampled through the rate at the reference "
+                             "temperature; give one of the two, not both")
+        return out
+
+    def distribution(self, key: str, spec: dict, at: tuple) -> Distribution:
+        where = _toml_key(*at)
+        name = spec.get("distribution")
+        if name is None:
+            raise self.error(where + ".distribution", None,
+                             "missing (a scipy.stats name: norm, lognorm, truncnorm, uniform, "
+                             "loguniform, triang, beta, ...)")
+        dist = getattr(scipy.stats, name, None) if isinstance(name, str) else None
+        if not isinstance(dist, scipy.stats.rv_continuous):
+            continuous = [n for n in dir(scipy.stats)
+                          if isinstance(getattr(scipy.stats, n), scipy.stats.rv_continuous)]
+            raise self.error(where + ".distribution", name, "not a scipy.stats continuous "
+                             "distribution; " + _suggest(str(name), continuous))
+        source = spec.get("source")
+        if not isinstance(source, str) or not source.strip():
+            raise self.error(where + ".source", source, "every distribution needs a `source`: "
+                             "where its width comes from (report, physics notes, handbook)")
+        relative = spec.get("relative", False)
+        if not isinstance(relative, bool):
+            raise self.error(where + ".relative", relative, "expected true or false")
+        shapes = [s.strip() for s in (dist.shapes or "").split(",") if s.strip()]
+        allowed = (*shapes, "loc", "scale")
+        given = {k: v for k, v in spec.items() if k not in _DIST_META}
+        for pname, value in given.items():
+            if pname not in allowed:
+                raise self.error(f"{where}.{pname}", value,
+                                 f"not a parameter of scipy.stats.{name} (its parameters: "
+                                 f"{', '.join(allowed)})")
+        for s in shapes:
+            if s not in given:
+                raise self.error(f"{where}.{s}", None,
+                                 f"missing: scipy.stats.{name} needs {', '.join(shapes)}")
+
+        t_ref = None
+        if key == RATE_AT_REFERENCE:
+            raw = spec.get("reference_temperature")
+            if raw is None:
+                raise self.error(where + ".reference_temperature", None,
+                                 "missing: the temperature the rate refers to (e.g. '580 K')")
+            t_ref = self.quantity(key, raw, "K", where + ".reference_temperature")
+            if not (math.isfinite(t_ref) and t_ref > 0):
+                raise self.error(where + ".reference_temperature", raw, "must be > 0 K")
+        elif "reference_temperature" in spec:
+            raise self.error(where + ".reference_temperature", spec["reference_temperature"],
+                             f"only for {RATE_AT_REFERENCE}")
+
+        unit = EXTRA_KEYS[key][0] if key in EXTRA_KEYS else SI_UNITS[key]
+        params: dict[str, float] = {}
+        # loc first: the role of lognorm's scale depends on it.
+        for pname in sorted(given, key=lambda p: p != "loc"):
+            raw = given[pname]
+            role = _parameter_role(name, pname, params.get("loc", 0.0))
+            at_param = f"{where}.{pname}"
+            if relative or role == "number":
+                if isinstance(raw, bool) or not isinstance(raw, numbers.Real):
+                    why = ("a relative distribution is of a dimensionless factor"
+                           if relative else f"`{pname}` of {name} is dimensionless")
+                    raise self.error(at_param, raw, f"expected a plain number ({why})")
+                params[pname] = float(raw)
+            elif role == "difference":
+                params[pname] = self.difference(key, raw, unit, at_param)
+            else:
+                params[pname] = self.quantity(key, raw, unit, at_param)
+            if not math.isfinite(params[pname]):
+                raise self.error(at_param, raw, "must be finite")
+        params = {p: params[p] for p in allowed if p in params}  # scipy's order
+        d = Distribution(key=key, name=name, params=tuple(params.items()), source=source,
+                         relative=relative, reference_temperature=t_ref)
+        lo, hi = d.frozen.support()
+        if np.isnan(lo) or np.isnan(hi) or not np.isfinite(d.frozen.ppf(0.5)):
+            raise self.error(where, spec, f"invalid parameters for scipy.stats.{name} "
+                             f"({d.describe()}): " + _PARAMETER_RULES.get(
+                                 name, "check scipy's documentation of the parameters"))
+        return d
+
+    def quantity(self, key: str, raw: object, unit: str, at: str) -> float:
+        try:
+            return to_si(key, raw, unit)
+        except SceneError as exc:
+            raise self.error(at, raw, exc.reason) from None
+
+    def difference(self, key: str, raw: object, unit: str, at: str) -> float:
+        """A spread: converted as a difference (5 degC of spread is 5 K, not 278.15 K)."""
+        value = self.quantity(key, raw, unit, at)
+        match = _NUMBER_THEN_UNIT.match(raw) if isinstance(raw, str) else None
+        if match and match["unit"]:
+            try:
+                value -= to_si(key, "0 " + match["unit"], unit)
+            except SceneError:
+                pass  # an expression, not "<number> <unit>": only offset units need this
+        return value
+
+    def check_support(self, sc: StudyScene, d: Distribution, at: tuple) -> None:
+        """Reject a distribution whose tail quantiles leave the physical range (any scene)."""
+        where = _toml_key(*at)
+        nominal = sc.nominal(d.key)
+        for q in (U_TAIL, 1.0 - U_TAIL):
+            x = float(d.ppf(np.float64(q), nominal))
+            reason = None
+            if not math.isfinite(x):
+                reason = "is not finite there"
+            elif d.key in _STUDY_RANGES:
+                lo, hi = _STUDY_RANGES[d.key]
+                if not lo < x < hi:
+                    reason = f"a sampled {d.key} must lie in ({lo:g}, {hi:g})"
+            if reason is None and d.key in SI_UNITS:
+                try:
+                    sc.scene.replace({d.key: x})
+                except SceneError as exc:
+                    reason = exc.reason
+            elif reason is None and x <= 0.0:
+                reason = "must be > 0"
+            if reason is not None:
+                unit = EXTRA_KEYS[d.key][0] if d.key in EXTRA_KEYS else SI_UNITS[d.key]
+                raise self.error(
+                    where, dict(d.params),
+                    f"{d.describe()} reaches {x:.6g} [{unit}] at its {q:g} quantile in scene "
+                    f"{sc.name!r}, outside the physical range ({reason}); use a distribution "
+                    "whose support stays inside it (truncnorm with suitable a/b, lognorm, "
+                    "beta, uniform, loguniform)")
+
+    def check_rate_reference(self, sc: StudyScene) -> None:
+        """Z = k_ref exp(E/R / T_ref) must stay a valid prefactor at the corners of the design."""
+        d = sc.uncertain.get(RATE_AT_REFERENCE)
+        if d is None:
+            return
+        rates = d.ppf(np.array([U_TAIL, 1.0 - U_TAIL]), sc.nominal(RATE_AT_REFERENCE))
+        ta = sc.uncertain.get("kinetics.activation_temperature")
+        temps = (ta.ppf(np.array([U_TAIL, 1.0 - U_TAIL]),
+                        sc.nominal("kinetics.activation_temperature"))
+                 if ta else [sc.nominal("kinetics.activation_temperature")])
+        for rate in rates:
+            for t_act in temps:
+                with np.errstate(over="ignore", invalid="ignore"):
+                    z = float(rate * np.exp(t_act / d.reference_temperature))
+                if not (math.isfinite(z) and z > 0):
+                    raise self.error(
+                        _toml_key("uncertain", RATE_AT_REFERENCE), dict(d.params),
+                        f"in scene {sc.name!r} the prefactor k_ref exp(E/R / T_ref) reaches "
+                        f"{z:g} 1/s (k_ref = {rate:g} 1/s, E/R = {t_act:g} K, T_ref = "
+                        f"{d.reference_temperature:g} K); raise reference_temperature")
+
+    # -- correlation, design, solver
+
+    def correlations(self, entries: object, scenes) -> tuple[Correlation, ...]:
+        if isinstance(entries, dict):
+            entries = [entries]
+        if not isinstance(entries, list):
+            raise self.error("correlation", entries, "expected [[correlation]] tables")
+        out: list[Correlation] = []
+        for i, entry in enumerate(entries):
+            table = self.table(entry, "correlation", i)
+            self.unknown_keys(table, _CORRELATION_KEYS, "correlation", i)
+            at = _toml_key("correlation", i)
+            keys = table.get("keys")
+            if (not isinstance(keys, list) or len(keys) != 2
+                    or not all(isinstance(k, str) for k in keys)):
+                raise self.error(at + ".keys", keys, "expected two uncertain keys")
+            if keys[0] == keys[1]:
+                raise self.error(at + ".keys", keys, "a key cannot be correlated with itself")
+            for k in keys:
+                lacking = [sc.name for sc in scenes if k not in sc.uncertain]
+                if lacking:
+                    raise self.error(at + ".keys", keys, f"{k!r} is not uncertain in scene(s) "
+                                     f"{', '.join(lacking)}: only uncertain inputs correlate")
+            if any(set(c.keys) == set(keys) for c in out):
+                raise self.error(at + ".keys", keys, "this pair is correlated twice")
+            source = table.get("source")
+            if not isinstance(source, str) or not source.strip():
+                raise self.error(at + ".source", source, "every correlation needs a `source`")
+            given = [m for m in ("spearman", "gaussian") if m in table]
+            if len(given) != 1:
+                raise self.error(at, None, "give exactly one of `spearman` (rank correlation) "
+                                 "or `gaussian` (the copula's normal-score correlation)")
+            value = table[given[0]]
+            if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                    or not -1.0 < value < 1.0:
+                raise self.error(f"{at}.{given[0]}", value, "must be a number in (-1, 1)")
+            rho = 2.0 * math.sin(math.pi * value / 6.0) if given[0] == "spearman" else value
+            out.append(Correlation(keys=(keys[0], keys[1]), rho=float(rho),
+                                   spearman=float(value) if given[0] == "spearman" else None,
+                                   source=source))
+        if out:
+            names = sorted({k for c in out for k in c.keys})
+            r = np.eye(len(names))
+            for c in out:
+                a, b = names.index(c.keys[0]), names.index(c.keys[1])
+                r[a, b] = r[b, a] = c.rho
+            if np.linalg.eigvalsh(r).min() <= 1e-10:
+                raise self.error("correlation", [[*c.keys, c.rho] for c in out],
+                                 "the correlations are inconsistent: their matrix is not "
+                                 "positive definite")
+        return tuple(out)
+
+    def design(self, table: object) -> DesignSpec:
+        if table is None:
+            raise self.error("design", None, "missing table [design] (method, n, seed)")
+        table = self.table(table, "design")
+        self.unknown_keys(table, _DESIGN_KEYS, "design")
+        method = self.string(table, "method", "design")
+        if method not in DESIGN_METHODS:
+            raise self.error("design.method", method, _suggest(method, DESIGN_METHODS))
+        n = table.get("n")
+        _check_n(self.file, method, n, key="design.n")
+        seed = table.get("seed")
+        if seed is None:
+            raise self.error("design.seed", None, "missing: a study must be reproducible "
+                             "(any integer >= 0)")
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise self.error("design.seed", seed, "expected an integer >= 0")
+        second = table.get("second_order", True)
+        if not isinstance(second, bool):
+            raise self.error("design.second_order", second, "expected true or false")
+        if "second_order" in table and method != "saltelli":
+            raise self.error("design.second_order", second, "only for method = 'saltelli'")
+        return DesignSpec(method=method, n=n, seed=seed, second_order=second)
+
+    def solver(self, table: object) -> SolverOptions:
+        table = self.table(table, "solver")
+        self.unknown_keys(table, _SOLVER_KEYS, "solver")
+        defaults = SolverOptions()
+        rtol = table.get("rtol", defaults.rtol)
+        if isinstance(rtol, bool) or not isinstance(rtol, numbers.Real) or not 0 < rtol < 1:
+            raise self.error("solver.rtol", rtol, "expected a number in (0, 1)")
+        tier = table.get("tier", defaults.tier)
+        tiers = _solver_tiers()
+        if not isinstance(tier, str) or (tiers and tier not in tiers):
+            raise self.error("solver.tier", tier, _suggest(str(tier), tiers or ["full"]))
+        bounds = {}
+        for name in ("h_min", "h_max"):
+            raw = table.get(name, getattr(defaults, name))
+            bounds[name] = self.quantity("solver." + name, raw, "m", "solver." + name)
+            if not (math.isfinite(bounds[name]) and bounds[name] > 0):
+                raise self.error("solver." + name, raw, "must be a finite height > 0")
+        if not bounds["h_min"] < bounds["h_max"]:
+            raise self.error("solver.h_min", table.get("h_min", defaults.h_min),
+                             f"must be below h_max ({bounds['h_max']:g} m)")
+        return SolverOptions(rtol=float(rtol), tier=tier, **bounds)
+
+
+def _check_n(file: str, method: str, n: object, key: str) -> None:
+    if n is None:
+        raise StudyError(file, key, None, "missing: the number of samples")
+    if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 1:
+        raise StudyError(file, key, n, "expected an integer >= 1")
+    if method in ("sobol", "saltelli") and n & (n - 1):
+        raise StudyError(file, key, n, f"the {method} design needs a power of 2 (keeps the "
+                         f"Sobol sequence balanced): e.g. {1 << (int(n) - 1).bit_length()}")
+
+
+def _solver_tiers() -> tuple[str, ...]:
+    """Tiers the solver offers, if it lists them (``skidmc.solver.TIERS``); else ("full",)."""
+    from skidmc import solver
+
+    return tuple(getattr(solver, "TIERS", ("full",)))
+
+
+def _parameter_role(dist: str, param: str, loc: float) -> str:
+    """How a parameter converts: "level" (absolute value), "difference" (a spread) or "number".
+
+    loc is a level; scale is a spread, except lognorm's scale with loc = 0 (the median, a
+    level); loguniform's a and b are the bounds (levels) and its scale a pure factor; every
+    other shape parameter is dimensionless (truncnorm's a and b are in units of scale).
+    """
+    if param == "loc":
+        return "level"
+    if dist in ("loguniform", "reciprocal"):
+        return "level" if param in ("a", "b") else "number"
+    if param == "scale":
+        return "level" if dist == "lognorm" and loc == 0.0 else "difference"
+    return "number"
+
+
+# Hints for invalid parameters of the common distributions (scipy's conventions).
+_PARAMETER_RULES = {
+    "norm": "scale > 0",
+    "lognorm": "s > 0 and scale > 0 (scale is the median when loc = 0)",
+    "truncnorm": "scale > 0 and a < b; a and b are in standard deviations from loc: "
+                 "a = (lower - loc) / scale",
+    "uniform": "scale > 0: the interval is [loc, loc + scale]",
+    "loguniform": "0 < a < b: the interval is [a, b]",
+    "triang": "0 <= c <= 1 and scale > 0: the interval is [loc, loc + scale], mode at "
+              "loc + c scale",
+    "beta": "a > 0, b > 0 and scale > 0: the interval is [loc, loc + scale]",
+}

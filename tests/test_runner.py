@@ -1,0 +1,394 @@
+"""The ensemble runner: statuses, determinism across workers/chunks/dask, kill -9 and resume.
+
+Tests marked "real solver" run skidmc.solver on a tiny study (2 scenes x 12 samples, rtol 1e-2);
+the others replace the solver by an analytic stand-in to check the runner's bookkeeping quickly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+import types
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import xarray as xr
+
+pytest.importorskip("skidmc.presets", reason="the study layer needs the presets (issue 2)")
+
+from skidmc import runner
+from skidmc.presets import get_preset
+from skidmc.runner import evaluate_batch, execute_study, main_run, run_study
+from skidmc.storage import StorageError, inspect_file
+from skidmc.study import SolverOptions
+
+ROOT = Path(__file__).resolve().parents[1]
+
+TINY = """
+[study]
+name = "tiny"
+[[scenes]]
+name = "quartz"
+preset = "paper-quartz"
+[[scenes]]
+name = "alumina"
+preset = "paper-alumina-smooth"
+[uncertain.mu]
+distribution = "lognorm"
+s = 0.1
+relative = true
+source = "test"
+[uncertain."target.conductivity"]
+distribution = "truncnorm"
+a = -3
+b = 3
+loc = 1.0
+scale = 0.1
+relative = true
+source = "test"
+[uncertain."kinetics.activation_temperature"]
+distribution = "uniform"
+loc = "24000 K"
+scale = "4000 K"
+source = "test"
+[uncertain."kinetics.prefactor"]
+distribution = "lognorm"
+s = 0.5
+relative = true
+source = "test"
+[[correlation]]
+keys = ["kinetics.activation_temperature", "kinetics.prefactor"]
+spearman = 0.8
+source = "test"
+[design]
+method = "mc"
+n = 12
+seed = 2024
+[solver]
+rtol = 1e-2
+"""
+
+
+def _solver_available() -> bool:
+    try:
+        import skidmc.solver  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+real_solver = pytest.mark.skipif(not _solver_available(), reason="skidmc.solver not importable")
+
+
+def _data(path) -> xr.Dataset:
+    """The data of a result file without its attributes (timestamps and history differ)."""
+    with xr.open_dataset(path) as ds:
+        return ds.load().drop_attrs()
+
+
+def _assert_same_data(a, b):
+    da, db = _data(a), _data(b)
+    assert set(da.variables) == set(db.variables)
+    for name in da.variables:
+        x, y = da[name].values, db[name].values
+        if x.dtype.kind == "f":
+            assert np.array_equal(x, y, equal_nan=True), name  # bitwise, NaN where NaN
+        else:
+            assert np.array_equal(x, y), name
+
+
+@pytest.fixture
+def study_file(tmp_path):
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY)
+    return path
+
+
+# --- a stand-in for the solver -------------------------------------------------------------------
+
+
+def _fake_height(scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
+    """H = 0.37 m (0.132 / mu)^2 (k2 / 1.69)^0.5: the trends of the model, none of its cost."""
+    if scene.mu > 0.15:
+        raise FloatingPointError(f"stand-in failure at mu = {scene.mu:.4f}")
+    h = 0.37 * (0.132 / scene.mu) ** 2 * math.sqrt(scene.target_conductivity / 1.69)
+    censored = "above" if h > h_max else "below" if h < h_min else None
+    h = min(max(h, h_min), h_max)
+    return types.SimpleNamespace(critical_height=h, censored=censored, evaluations=3,
+                                 flags=("stand_in",), wall_time=1e-6)
+
+
+@pytest.fixture
+def fake_solver(monkeypatch):
+    import skidmc.solver
+
+    monkeypatch.setattr(skidmc.solver, "critical_height", _fake_height)
+
+
+# --- evaluate_batch ------------------------------------------------------------------------------
+
+
+def test_evaluate_batch_statuses_and_failures(fake_solver):
+    base = get_preset("paper-quartz")
+    rows = [{"mu": 0.132}, {"mu": 0.2}, {"mu": -1.0}, {"mu": 0.01}, {"mu": 0.14}]
+    res = evaluate_batch(rows, SolverOptions(h_max=50.0), base=base)
+    assert list(res.status) == ["ok", "failed", "failed", "censored_above", "ok"]
+    assert res.critical_height[0] == pytest.approx(0.37, rel=1e-2)
+    assert np.isnan(res.critical_height[[1, 2]]).all()  # failed: NaN, never imputed
+    assert res.critical_height[3] == 50.0  # censored: the bound
+    assert "FloatingPointError: stand-in failure" in res.failure_reason[1]
+    assert res.failure_reason[2].startswith("invalid inputs: SceneError")
+    assert res.inputs["mu"][2] == -1.0  # the value that was asked for is kept
+    assert res.flags[0] == "stand_in" and res.evaluations[0] == 3
+    assert len(res) == 5
+
+
+def test_evaluate_batch_accepts_scenes_and_columns(fake_solver):
+    base = get_preset("paper-quartz")
+    by_scene = evaluate_batch([base, base.replace(mu=0.1)])
+    by_columns = evaluate_batch({"mu": np.array([0.132, 0.1])}, base="paper-quartz")
+    assert np.array_equal(by_scene.critical_height, by_columns.critical_height)
+    assert list(by_scene.inputs["flow_stress"]) == [base.flow_stress] * 2
+
+
+def test_non_finite_height_is_a_failure(monkeypatch):
+    import skidmc.solver
+
+    monkeypatch.setattr(skidmc.solver, "critical_height", lambda scene, **kw: types.SimpleNamespace(
+        critical_height=float("nan"), censored=None, evaluations=1, flags=(), wall_time=0.0))
+    res = evaluate_batch([get_preset("paper-quartz")])
+    assert res.status[0] == "failed" and "non-finite" in res.failure_reason[0]
+
+
+@real_solver
+def test_evaluate_batch_real_solver_and_censoring():
+    quartz = get_preset("paper-quartz")
+    res = evaluate_batch([quartz, quartz, quartz], None)
+    assert set(res.status) == {"ok"} and np.all(res.wall_time > 0)
+    h = res.critical_height[0]
+    low = evaluate_batch([quartz], {"rtol": 1e-2, "h_max": 0.5 * h})
+    high = evaluate_batch([quartz], {"rtol": 1e-2, "h_min": 2 * h, "h_max": 10 * h})
+    assert low.status[0] == "censored_above" and low.critical_height[0] == 0.5 * h
+    assert high.status[0] == "censored_below" and high.critical_height[0] == 2 * h
+
+
+# --- run_study bookkeeping (stand-in solver, in-process) -----------------------------------------
+
+
+def test_failing_samples_never_stop_the_run(tmp_path, study_file, fake_solver):
+    path = run_study(study_file, tmp_path / "out", workers=1, progress=False)
+    assert path == tmp_path / "out" / "ensemble.h5"
+    ds = xr.open_dataset(path)
+    status = ds.status.values
+    assert ds.attrs["complete"] == 1
+    assert set(status.ravel()) <= {"ok", "failed"} and "failed" in status  # mu > 0.15 fails
+    failed = status == "failed"
+    assert np.isnan(ds.critical_height.values[failed]).all()
+    assert np.isfinite(ds.critical_height.values[~failed]).all()
+    assert all("stand-in failure" in r for r in ds.failure_reason.values[failed])
+    assert (ds.mu.values[failed] > 0.15).all() and (ds.mu.values[~failed] <= 0.15).all()
+
+
+def test_single_scene_study(tmp_path, fake_solver):
+    path = tmp_path / "one.toml"
+    path.write_text(TINY.split("[[scenes]]")[0] + '[scene]\npreset = "paper-quartz"\n'
+                    + TINY[TINY.index("[uncertain.mu]"):])
+    ds = xr.open_dataset(run_study(path, tmp_path / "one.h5", workers=1, progress=False))
+    assert ds.critical_height.dims == ("sample",) and ds.sizes["sample"] == 12
+    assert "" not in ds.status.values and ds.attrs["complete"] == 1
+
+
+def test_n_override_and_mc_prefix(tmp_path, study_file, fake_solver):
+    full = run_study(study_file, tmp_path / "full.h5", workers=1, progress=False)
+    short = run_study(study_file, tmp_path / "short.h5", n=5, workers=1, progress=False)
+    a, b = _data(full), _data(short)
+    assert b.sizes["sample"] == 5
+    assert np.array_equal(a.mu.values[:, :5], b.mu.values)
+
+
+def test_a_sample_that_kills_its_worker_is_isolated(tmp_path, study_file, fake_solver,
+                                                    monkeypatch):
+    real = runner._evaluate_chunk
+
+    def crashing(chunk):
+        if chunk.start <= 3 < chunk.stop:
+            raise cf.process.BrokenProcessPool("worker died")
+        return real(chunk)
+
+    monkeypatch.setattr(runner, "_evaluate_chunk", crashing)
+    path = run_study(study_file, tmp_path / "o.h5", workers=1, chunk_size=4, progress=False)
+    ds = xr.open_dataset(path)
+    assert list(ds.status.values[:, 3]) == ["failed", "failed"]
+    assert "worker process died" in ds.failure_reason.values[0, 3]
+    others = np.delete(ds.status.values, 3, axis=1)
+    assert "" not in others and ds.attrs["complete"] == 1
+
+
+def test_existing_files_are_never_overwritten(tmp_path, study_file, fake_solver):
+    out = tmp_path / "o.h5"
+    run_study(study_file, out, workers=1, progress=False)
+    before = out.read_bytes()
+    with pytest.raises(StorageError, match="complete run"):
+        run_study(study_file, out, workers=1, progress=False)
+    report = execute_study(study_file, out, workers=1, resume=True, progress=False)
+    assert report.evaluated == 0  # already complete: nothing to do
+    assert out.read_bytes() == before
+    foreign = tmp_path / "foreign.h5"
+    foreign.write_text("mine")
+    with pytest.raises(StorageError, match="not an HDF5"):
+        run_study(study_file, foreign, workers=1, progress=False)
+    with pytest.raises(StorageError, match="not an HDF5"):
+        run_study(study_file, foreign, workers=1, progress=False, resume=True)
+    assert foreign.read_text() == "mine"
+
+
+def _args(study, out, **kw):
+    return argparse.Namespace(study=str(study), out=str(out), n=kw.get("n"), workers=1,
+                              scheduler=None, resume=kw.get("resume", False),
+                              quiet=kw.get("quiet", True))
+
+
+def test_main_run_exit_codes(tmp_path, study_file, fake_solver, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(TINY.replace("seed = 2024", "seed = -1"))
+    assert main_run(_args(bad, tmp_path / "x")) == 2
+    assert "design.seed" in capsys.readouterr().err
+    assert main_run(_args(study_file, tmp_path / "x", quiet=False)) == 0
+    captured = capsys.readouterr()
+    assert captured.out.strip() == str(tmp_path / "x" / "ensemble.h5")
+    assert "evaluations" in captured.err and "failed" in captured.err
+    assert main_run(_args(study_file, tmp_path / "x")) == 2
+    assert "refusing to overwrite" in capsys.readouterr().err
+
+
+def test_no_progress_bar_when_stderr_is_not_a_terminal(tmp_path, study_file, fake_solver,
+                                                       capfd):
+    run_study(study_file, tmp_path / "o.h5", workers=1)  # progress=None: automatic
+    err = capfd.readouterr().err
+    assert "sample/s" not in err and "%|" not in err
+
+
+# --- determinism, dask, interruption (real solver) ----------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The tiny study run uninterrupted, in this process, in one chunk."""
+    if not _solver_available():
+        pytest.skip("skidmc.solver not importable")
+    d = tmp_path_factory.mktemp("reference")
+    (d / "tiny.toml").write_text(TINY)
+    path = run_study(d / "tiny.toml", d / "ref.h5", workers=1, chunk_size=12, progress=False)
+    status = xr.open_dataset(path).status.values
+    assert set(status.ravel()) == {"ok"}, status
+    return path
+
+
+@real_solver
+def test_identical_for_any_worker_count_and_chunk_size(tmp_path, study_file, reference):
+    one = run_study(study_file, tmp_path / "one.h5", workers=1, chunk_size=5, progress=False)
+    _assert_same_data(one, reference)
+    two = run_study(study_file, tmp_path / "two.h5", workers=2, chunk_size=3, progress=False)
+    _assert_same_data(two, reference)
+
+
+@real_solver
+def test_dask_cluster_equals_local_run(tmp_path, study_file, reference):
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        path = run_study(study_file, tmp_path / "dask.h5", scheduler=client, chunk_size=4,
+                         progress=False)
+    _assert_same_data(path, reference)
+
+
+def _done_count(path: Path) -> int:
+    """Samples written so far, read while the writer holds the file (no HDF5 file lock)."""
+    try:
+        with h5py.File(path, "r", locking=False) as f:
+            return int(f["done"][:].sum())
+    except (OSError, KeyError):  # not created yet, or caught mid-rename
+        return 0
+
+
+@real_solver
+def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path, study_file, reference):
+    out = tmp_path / "killed.h5"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT / "src"),
+                                                      env.get("PYTHONPATH")]))
+    cmd = [sys.executable, "-m", "skidmc.runner", str(study_file), "--out", str(out),
+           "--workers", "1", "--chunk-size", "1", "--quiet"]
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 300
+    try:
+        while _done_count(out) < 1:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no chunk written in 300 s"
+            time.sleep(0.005)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the run and anything it started
+        proc.communicate()
+    info = inspect_file(out)
+    assert info["skidmc"] and not info["complete"]
+    assert 1 <= info["done"] < info["n_rows"], "killed too late to interrupt anything"
+
+    # Without --resume the unfinished file is refused, and left as it is.
+    assert main_run(_args(study_file, out)) == 2
+    assert inspect_file(out)["done"] == info["done"]
+
+    run_study(study_file, out, workers=1, resume=True, chunk_size=5, progress=False)
+    _assert_same_data(out, reference)
+    history = xr.open_dataset(out).attrs["history"].splitlines()
+    assert any("started with 0 of 12" in line for line in history)
+    assert any(f"started with {info['done']} of 12" in line for line in history)
+
+
+_CRASHING_SOLVER = '''
+# Loaded at start-up of every Python process of the test (worker processes included): replaces
+# the solver by the stand-in of tests/test_runner.py, which kills its process for mu > 0.14.
+import math, os, types
+import skidmc.solver
+
+def critical_height(scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
+    if scene.mu > 0.14:
+        os._exit(3)  # a crash in compiled code: no exception, the process is gone
+    h = 0.37 * (0.132 / scene.mu) ** 2 * math.sqrt(scene.target_conductivity / 1.69)
+    return types.SimpleNamespace(critical_height=h, censored=None, evaluations=3, flags=(),
+                                 wall_time=1e-6)
+
+skidmc.solver.critical_height = critical_height
+'''
+
+
+def test_a_crashing_worker_process_costs_only_its_sample(tmp_path, study_file):
+    (tmp_path / "sitecustomize.py").write_text(_CRASHING_SOLVER)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), str(ROOT / "src"),
+                                                      env.get("PYTHONPATH")]))
+    out = tmp_path / "crash.h5"
+    proc = subprocess.run([sys.executable, "-m", "skidmc.runner", str(study_file), "--out",
+                           str(out), "--workers", "2", "--chunk-size", "4", "--quiet"],
+                          env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr
+    ds = xr.open_dataset(out)
+    crashed = ds.mu.values > 0.14
+    assert crashed.any() and (~crashed).any()
+    # Every sample of a scene where it crashed is failed, as the crash took the whole sample
+    # (all scenes) down; every other sample is evaluated.
+    failed = (ds.status.values == "failed").any(axis=0)
+    assert np.array_equal(failed, crashed.any(axis=0))
+    assert all("worker process died" in r
+               for r in ds.failure_reason.values[:, failed].ravel())
+    assert set(ds.status.values[:, ~failed].ravel()) == {"ok"}
+    assert ds.attrs["complete"] == 1
