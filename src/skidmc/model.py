@@ -45,6 +45,39 @@ DEPTH_DIFFUSION_LENGTHS = 4.0
 #: by far less than rtol.
 DEFAULT_RUNAWAY_FRACTION = 1e-5
 
+# --- Validity flags (docs/model.md, "Validity flags"). Each marks a scene, or a result, where
+# the report's model is stretched beyond what it can support; the number is still computed.
+# Names are short: storage keeps the comma-separated flags in 64 characters.
+
+#: "stops_early": sliding stops before this fraction of the contact time t_c. The contact area
+#: (pi D X, X ~ sin(omega t)) is then under sin(pi/8) = 38 % of its maximum and still growing
+#: fast, and the result hangs on Eq. (10)'s stop criterion (the contact sticks for good once V_r
+#: reaches 0; re-sliding under the still-rising normal load is not modelled).
+EARLY_STOP_FRACTION = 0.25
+
+#: "self_heating": the unheated HE at T0 runs away (adiabatic induction time, or reaction time
+#: 1/k for a weakly exothermic HE) within this time [s]: a billet with these kinetics could not be
+#: held at T0, and a height, if one is found, is not a friction result.
+SELF_HEATING_TIME = 3600.0
+
+#: "hot_ignition": the kinetics need the HE above this temperature [K] to run away within the
+#: heating time (the temperature at which the adiabatic induction time equals t_exit, a lower
+#: bound on the surface temperature at ignition). Beyond it the HE would be a vaporising melt
+#: and the targets near or past melting (copper 1358 K) while the model keeps room-temperature
+#: properties, and the kinetics are extrapolated far from any measurement.
+HOT_IGNITION_TEMPERATURE = 1000.0
+
+#: "crushed" (per height): the indentation depth X_max = V_n0 / omega exceeds this fraction of
+#: the diameter D: the cap law a^2 = D X is off by more than 10 % and the hemisphere's rigid-body
+#: kinematics (Eq. 10) no longer describe a billet flattened by a fifth of its height.
+CRUSH_DEPTH_FRACTION = 0.1
+
+#: "long_slide" (per height): the contact slides over more than this many maximum contact
+#: diameters d_c (Eq. 5) while heating. The model keeps the target under the contact fixed; in
+#: fact fresh, cold target keeps arriving, which draws more heat from the HE, so the height is
+#: then conservative (too low).
+LONG_SLIDE_DIAMETERS = 1.0
+
 
 @dataclass(frozen=True)
 class Resolution:
@@ -168,10 +201,35 @@ class SkidModel:
     dt_initial: float             # [s]
     terms: tuple = field(default_factory=tuple)
     flags: tuple = field(default_factory=tuple)
+    # Validity diagnostics (see the flags at the top of this module)
+    ignition_temperature: float = math.nan  # T at which tau_ad = t_exit [K] (inf: never)
+    rest_time: float = math.inf       # runaway time of the unheated HE at T0 [s]
+    billet_diameter: float = math.nan  # D [m]
+    indent_per_root_height: float = 0.0  # X_max / sqrt(H) = sqrt(2 g) cos(phi) / omega [m^0.5]
+    slide_per_root_height: float = 0.0   # sliding distance / sqrt(H) while heating [m^0.5]
 
     def flux_amplitude(self, height):
         """q0 = mu sigma V0 [W/m^2] for drop height ``height`` [m] (Eqs. 1, 10)."""
         return self.flux_per_root_height * math.sqrt(height)
+
+    def height_flags(self, height):
+        """Validity flags that depend on the drop height ``height`` [m] (tuple of str).
+
+        ``"crushed"``: indentation depth X_max > :data:`CRUSH_DEPTH_FRACTION` D.
+        ``"long_slide"``: sliding distance while heating > :data:`LONG_SLIDE_DIAMETERS` d_c.
+        Both grow with H, so for a result censored "above" they are checked at ``h_max``.
+        """
+        if "no_friction" in self.flags or not height > 0.0:
+            return ()
+        root = math.sqrt(height)
+        indent = self.indent_per_root_height * root
+        flags = []
+        if indent > CRUSH_DEPTH_FRACTION * self.billet_diameter:
+            flags.append("crushed")
+        contact_diameter = 2.0 * math.sqrt(self.billet_diameter * indent)  # Eq. (5)
+        if self.slide_per_root_height * root > LONG_SLIDE_DIAMETERS * contact_diameter:
+            flags.append("long_slide")
+        return tuple(flags)
 
 
 def build_model(scene, resolution=None, *, level=0.0, melting=True,
@@ -217,9 +275,8 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         terms.append("normal_force_spin")
     if exit_kind == "stops_sliding":
         flags.append("stops_sliding")
-    if mu == 0.0:
-        terms = []
-        flags.append("no_friction")
+        if t_exit < EARLY_STOP_FRACTION * t_c:
+            flags.append("stops_early")
 
     # Flux extension after the exit, for the search's continuous margin only: keep
     # the exit flux (continuous) unless it has dropped below the contact's mean.
@@ -243,6 +300,16 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
                                           runaway_fraction))
     else:
         t_run = math.inf
+
+    t_ign, rest_time = _ignition_diagnostics(prefactor, t_a, adiabatic_rise,
+                                             scene.initial_temperature, t_exit)
+    if rest_time < SELF_HEATING_TIME:
+        flags.append("self_heating")
+    if t_ign > HOT_IGNITION_TEMPERATURE:
+        flags.append("hot_ignition")
+    if mu == 0.0:
+        terms = []
+        flags.append("no_friction")
 
     latent = scene.he_heat_of_fusion if melting else 0.0
     if latent > 0.0 and scene.he_melting_point < t_run:
@@ -283,4 +350,33 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         initial_temperature=scene.initial_temperature, runaway_temperature=t_run,
         resolution=resolution, runaway_fraction=runaway_fraction,
         dt_initial=1e-6 * t_exit, terms=tuple(terms), flags=tuple(flags),
+        ignition_temperature=t_ign, rest_time=rest_time, billet_diameter=diameter,
+        indent_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * math.cos(phi) / omega,
+        slide_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * mean_shape * t_exit,
     )
+
+
+def _ignition_diagnostics(prefactor, activation_temperature, adiabatic_rise,
+                          initial_temperature, t_exit):
+    """(ignition temperature [K], runaway time at rest [s]) for the validity flags.
+
+    The ignition temperature is where the adiabatic induction time
+    tau_ad(T) = T^2 / (T_a dT_ad k(T)) equals t_exit (for an inert HE, dT_ad = 0, where
+    the reaction time 1/k does): no cell can run away within the heating time below it.
+    The runaway time at rest is min(1/k, tau_ad) at T0.
+    """
+    if not prefactor > 0.0:
+        return math.inf, math.inf
+    ln_k0 = math.log(prefactor) - activation_temperature / initial_temperature
+    ln_rest = -ln_k0 + min(0.0, math.log(initial_temperature**2
+                                         / (activation_temperature * adiabatic_rise))
+                           if adiabatic_rise > 0.0 else 0.0)
+    rest_time = math.exp(min(ln_rest, 700.0))
+    if adiabatic_rise > 0.0:
+        t_ign = float(runaway_temperature(prefactor, activation_temperature, adiabatic_rise,
+                                          t_exit, 1.0))
+    elif prefactor * t_exit > 1.0:
+        t_ign = activation_temperature / math.log(prefactor * t_exit)
+    else:
+        t_ign = math.inf
+    return t_ign, rest_time
