@@ -32,6 +32,10 @@ from skidmc.thermal import (INFO_EVENT, INFO_FAILED, INFO_REJECTED, INFO_STEPS,
 
 FT = 0.3048  # [m per ft], exact
 
+#: Model fidelity tiers: "full" (the report's model, converged to rtol) and "fast" (the
+#: reduced model of :mod:`skidmc.fast`, ~10-20 us per height, a few percent off the full model).
+TIERS = ("full", "fast")
+
 #: Default search bounds [m]: 1 mm to 10 km of drop height.
 DEFAULT_H_MIN = 1e-3
 DEFAULT_H_MAX = 1e4
@@ -46,6 +50,24 @@ DEFAULT_H_MAX = 1e4
 ERROR_LEVEL0 = 1.2e-2
 DISCRETISATION_SHARE = 0.8
 MAX_STEPS = 200_000
+
+#: Coarse-to-fine search: at level L >= COARSE_GAP, the critical height is first found at level
+#: L - COARSE_GAP (each simulation ~10x cheaper), and the search at level L starts there with a
+#: bracket a few coarse errors wide, so it needs ~4 fine simulations instead of ~8.
+COARSE_GAP = 2.0
+
+#: Richardson extrapolation (second order) of the searches at levels L - 1 and L. The
+#: refinement study measures its residual error, over all report presets and the second
+#: series' extreme mu, as 3.8e-4, 2.1e-4, 6.6e-5, 2.2e-5 at L = 1.5, 2, 2.5, 3 (and 1.7e-3 at
+#: L = 1, before the asymptotic range: hence RICHARDSON_MIN_LEVEL). RICHARDSON_ERROR_LEVEL0 *
+#: 4**-L bounds every observed value from L = 1.5 up, with 20 % to spare at L = 2.
+RICHARDSON_ERROR_LEVEL0 = 4.2e-3
+RICHARDSON_MIN_LEVEL = 1.5
+
+
+def modelled_error(level):
+    """Modelled relative discretisation error of the critical height at ``level`` [1]."""
+    return ERROR_LEVEL0 * 4.0 ** (-level)
 
 
 class SolverError(RuntimeError):
@@ -144,6 +166,11 @@ class HeightResult:
         ``"no_friction"``.
     error_estimate : float
         Estimated relative numerical error of ``critical_height`` [1].
+    extrapolated : bool
+        The height is the Richardson extrapolation of two levels.
+    richardson_correction : float
+        Relative size of that extrapolation's correction [1]: an a-posteriori error
+        indicator of the finer level alone (0 when not extrapolated).
     rtol, level, method, wall_time, exit_time, exit_kind, terms
         Settings and diagnostics (wall_time [s], exit_time [s]).
     """
@@ -160,6 +187,8 @@ class HeightResult:
     exit_time: float = math.nan
     exit_kind: str = ""
     terms: tuple = ()
+    extrapolated: bool = False
+    richardson_correction: float = 0.0
     history: list = field(default_factory=list, repr=False)
 
     @property
@@ -178,17 +207,44 @@ class HeightResult:
         return d
 
 
+def _half_level_above(needed):
+    """Smallest half-integer level >= ``needed`` (and >= 0)."""
+    return max(0.0, math.ceil(2.0 * needed - 1e-9) / 2.0)
+
+
 def level_for_rtol(rtol):
     """Lowest half-integer refinement level whose modelled error is below 0.8 rtol [1]."""
     if not rtol > 0.0:
         raise SceneError("rtol", rtol, "must be > 0")
-    needed = math.log(ERROR_LEVEL0 / (DISCRETISATION_SHARE * rtol)) / math.log(4.0)
-    return max(0.0, math.ceil(2.0 * needed - 1e-9) / 2.0)
+    return _half_level_above(
+        math.log(ERROR_LEVEL0 / (DISCRETISATION_SHARE * rtol)) / math.log(4.0))
+
+
+def extrapolated_error(level):
+    """Modelled relative error of the Richardson value from levels ``level - 1`` and ``level`` [1]."""
+    return RICHARDSON_ERROR_LEVEL0 * 4.0 ** (-level)
+
+
+def plan_for_rtol(rtol):
+    """Cheapest way to reach ``rtol``: ``(level, extrapolate)``.
+
+    Either one search at :func:`level_for_rtol`, or (when that is cheaper) a search at
+    ``level - 1`` and one at ``level`` combined by Richardson extrapolation, whose modelled
+    error :func:`extrapolated_error` is below 0.8 rtol. Extrapolation is offered only from
+    :data:`RICHARDSON_MIN_LEVEL` up, where the refinement study shows second order.
+    """
+    plain = level_for_rtol(rtol)
+    extrapolated = max(RICHARDSON_MIN_LEVEL, _half_level_above(
+        math.log(RICHARDSON_ERROR_LEVEL0 / (DISCRETISATION_SHARE * rtol)) / math.log(4.0)))
+    # A search at level L costs ~2.2^L simulations' worth; the pair costs ~1.45x level L.
+    if extrapolated < plain:
+        return extrapolated, True
+    return plain, False
 
 
 def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
-                    *, method="brent", level=None, melting=True, runaway_fraction=None,
-                    h_guess=None, model=None):
+                    *, method="brent", level=None, extrapolate=None, melting=True,
+                    runaway_fraction=None, h_guess=None, model=None):
     """Critical drop height of a scene [m].
 
     Parameters
@@ -196,9 +252,12 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     scene : skidmc.scene.Scene
     rtol : float
         Relative tolerance on the critical height [1]: 80 % goes to the mesh and
-        steps (see :func:`level_for_rtol`), 20 % to the root finder.
-    tier : {"full"}
-        Model fidelity.
+        steps (see :func:`plan_for_rtol`), 20 % to the root finder.
+    tier : {"full", "fast"}
+        Model fidelity: "full" is the report's model converged to ``rtol``; "fast" is the
+        reduced model of :func:`skidmc.fast.fast_critical_height` (``rtol`` and the numerical
+        options do not apply; its measured error against the full model is in
+        ``results/benchmarks/fast_tier.md`` and in the result's ``error_estimate``).
     h_min, h_max : float
         Search bounds [m]. No event at ``h_max`` is censored "above"; an event at
         ``h_min`` is censored "below". Neither is an error.
@@ -207,6 +266,9 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         geometric bisection on go/no-go.
     level : float, optional
         Force a refinement level instead of deriving it from ``rtol``.
+    extrapolate : bool, optional
+        Richardson extrapolation from ``level - 1`` and ``level`` (second order). Default:
+        chosen with the level by :func:`plan_for_rtol`; False when ``level`` is forced.
     melting : bool
         Model melting of the HE.
     runaway_fraction : float, optional
@@ -214,32 +276,83 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     h_guess : float, optional
         First height tried [m].
     model : SkidModel, optional
-        A prebuilt model (overrides scene, level, melting, runaway_fraction).
+        A prebuilt model (overrides scene, level, melting, runaway_fraction; no
+        extrapolation or coarse start).
 
     Returns
     -------
     HeightResult
     """
     start = time.perf_counter()
-    if tier != "full":
-        raise SceneError("tier", tier, "unknown tier (expected 'full')")
+    if tier not in TIERS:
+        raise SceneError("tier", tier, f"unknown tier (expected one of {', '.join(TIERS)})")
     if not (0.0 < h_min < h_max):
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
+    if tier == "fast":
+        from skidmc.fast import fast_critical_height
+
+        return fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
     if not (isinstance(rtol, (int, float)) and 0.0 < rtol < 0.5):
         raise SceneError("rtol", rtol, "must be a number in (0, 0.5)")
+    if method not in ("brent", "bisection"):
+        raise SceneError("method", method, "expected 'brent' or 'bisection'")
     if level is None:
-        level = level_for_rtol(rtol)
-    if model is None:
+        level, planned = plan_for_rtol(rtol)
+        extrapolate = planned if extrapolate is None else extrapolate
+    extrapolate = bool(extrapolate) and model is None and level >= 1.0
+    common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
+                  runaway_fraction=runaway_fraction)
+    if not extrapolate:
+        res = _search(scene, rtol, level, (1.0 - DISCRETISATION_SHARE) * rtol, model=model,
+                      h_guess=h_guess, **common)
+        res.wall_time = time.perf_counter() - start
+        return res
+
+    # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
+    # (4 d_L + d_{L-1}) / 3, so each search gets 3/5 of the root-finder share.
+    x_tol = 0.6 * (1.0 - DISCRETISATION_SHARE) * rtol
+    coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
+    fine = _search(scene, rtol, level, x_tol, h_guess=coarse.critical_height,
+                   overshoot=2.0 * modelled_error(level - 1.0), **common)
+    fine.evaluations += coarse.evaluations
+    fine.wall_time = time.perf_counter() - start
+    if fine.censored is None and coarse.censored is None:
+        correction = (fine.critical_height - coarse.critical_height) / 3.0
+        fine.critical_height += correction
+        fine.richardson_correction = correction / fine.critical_height
+        fine.extrapolated = True
+        fine.error_estimate = extrapolated_error(level) + (1.0 - DISCRETISATION_SHARE) * rtol
+    return fine
+
+
+def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
+            model=None, h_guess=None, overshoot=None):
+    """One critical-height search at one resolution level (see :func:`critical_height`).
+
+    ``x_tol`` [1] is the root finder's tolerance on ln H. At levels >= COARSE_GAP with no
+    guess, the search starts from the root found at ``level - COARSE_GAP``.
+    """
+    own_model = model is None
+    if own_model:
         kwargs = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
         model = build_model(scene, level=level, melting=melting, **kwargs)
     base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
                 exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
-                error_estimate=ERROR_LEVEL0 * 4.0 ** (-level)
-                + (1.0 - DISCRETISATION_SHARE) * rtol)
+                error_estimate=modelled_error(level) + (1.0 - DISCRETISATION_SHARE) * rtol)
 
     if "no_friction" in model.flags:
-        return HeightResult(critical_height=h_max, censored="above", evaluations=0,
-                            wall_time=time.perf_counter() - start, **base)
+        return HeightResult(critical_height=h_max, censored="above", evaluations=0, **base)
+
+    coarse_evaluations = 0
+    if method == "brent" and h_guess is None and own_model and level >= COARSE_GAP:
+        coarse = _search(scene, rtol, level - COARSE_GAP,
+                         max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)), h_min=h_min,
+                         h_max=h_max, method=method, melting=melting,
+                         runaway_fraction=runaway_fraction)
+        coarse_evaluations = coarse.evaluations
+        h_guess = coarse.critical_height
+        # The fine root lies within the coarse level's error of the coarse root.
+        overshoot = 2.0 * modelled_error(level - COARSE_GAP)
 
     cache = {}
 
@@ -249,20 +362,18 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         return cache[x]
 
     x_min, x_max = math.log(h_min), math.log(h_max)
-    x_tol = (1.0 - DISCRETISATION_SHARE) * rtol  # root-finder share of the budget, on ln H
-
     if method == "bisection":
         x_root, censored = _bisection(margin, x_min, x_max, x_tol)
-    elif method == "brent":
-        x_root, censored = _brent(margin, x_min, x_max, x_tol, model, h_guess)
     else:
-        raise SceneError("method", method, "expected 'brent' or 'bisection'")
+        x_root, censored = _brent(margin, x_min, x_max, x_tol, model, h_guess,
+                                  overshoot=overshoot or 0.05)
     history = sorted((math.exp(x), m) for x, m in cache.items())
     # Censored results report the bound itself, exactly as given.
     height = {"above": h_max, "below": h_min}.get(censored, math.exp(x_root))
+    # Validity at the height found (indentation depth, sliding distance): skidmc.model.
+    base["flags"] = model.flags + model.height_flags(height)
     return HeightResult(critical_height=height, censored=censored,
-                        evaluations=len(cache), wall_time=time.perf_counter() - start,
-                        history=history, **base)
+                        evaluations=len(cache) + coarse_evaluations, history=history, **base)
 
 
 def _bisection(margin, x_min, x_max, x_tol):
@@ -281,8 +392,12 @@ def _bisection(margin, x_min, x_max, x_tol):
     return 0.5 * (lo + hi), None
 
 
-def _brent(margin, x_min, x_max, x_tol, model, h_guess):
-    """Bracket the root of the margin from a first guess, then Brent's method on ln H."""
+def _brent(margin, x_min, x_max, x_tol, model, h_guess, overshoot=0.05):
+    """Bracket the root of the margin from a first guess, then Brent's method on ln H.
+
+    ``overshoot`` [1, in ln H] is added to each bracketing step beyond the root that the
+    margin predicts (t_ev ~ 1/H): about the error of the guess.
+    """
     horizon = math.log(model.end_time / model.exit_time)
     x = math.log(h_guess) if h_guess else 0.0  # 1 m by default
     x = min(max(x, x_min), x_max)
@@ -300,12 +415,12 @@ def _brent(margin, x_min, x_max, x_tol, model, h_guess):
                 return x_max, "above"
             # t_ev ~ 1/H: the root lies about m above; with no event in the horizon, at
             # least `horizon` above. Overshoot a little so one step usually brackets.
-            step = 1.2 * m + 0.05 if math.isfinite(m) else 2.0 * horizon
+            step = 1.2 * m + overshoot if math.isfinite(m) else 2.0 * horizon
             x = min(x + step, x_max)
         else:
             if x <= x_min:
                 return x_min, "below"
-            x = max(x + 1.2 * m - 0.05, x_min)
+            x = max(x + 1.2 * m - overshoot, x_min)
     else:  # pragma: no cover - the loop always brackets or censors within 60 steps
         raise SolverError("could not bracket the critical height")
 

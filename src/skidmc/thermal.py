@@ -44,7 +44,9 @@ INFO_T_FINAL = 6        # time reached [s]
 INFO_FAILED = 7         # 1.0 when the integrator could not proceed (step underflow)
 INFO_T_EXIT_MAX = 8     # highest HE cell temperature at the exit time t_exit [K]
 INFO_Y_EXIT_MAX = 9     # highest fraction reacted at the exit time [1]
-INFO_SIZE = 10
+INFO_NEWTON_FAILURES = 10  # steps rejected because Newton did not converge
+INFO_NEWTON_ITERATIONS = 11  # Newton iterations, all steps
+INFO_SIZE = 12
 
 # Ratio LTE / (corrector - quadratic predictor) of BDF2 at constant step:
 # BDF2 error -(2/9) h^3 y''', predictor error +h^3 y''' -> 2/11.
@@ -304,6 +306,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
         q = _flux(t_new, q0, slide_s, slide_c, omega, t_exit, q_ext)
         converged = False
         for _it in range(12):
+            info[INFO_NEWTON_ITERATIONS] += 1
             # Residual R = w (h(T) - hist) - bdt [fluxes + w S(T)]; Jacobian tridiagonal.
             for i in range(n):
                 if i >= n_target:
@@ -397,6 +400,8 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
 
         if not converged or err > tol_temperature:
             rejected += 1
+            if not converged:
+                info[INFO_NEWTON_FAILURES] += 1
             if converged:
                 dt *= max(0.2, 0.9 * (tol_temperature / err) ** (1.0 / 3.0))
             else:
