@@ -62,6 +62,15 @@ COARSE_GAP = 2.0
 #: L = 1, before the asymptotic range: hence RICHARDSON_MIN_LEVEL). RICHARDSON_ERROR_LEVEL0 *
 #: 4**-L bounds every observed value from L = 1.5 up, with 20 % to spare at L = 2.
 RICHARDSON_ERROR_LEVEL0 = 4.2e-3
+
+#: Bound on |m''/m'| of the margin m(ln H) near the root [1], for the secant steps' error
+#: bound. Measured on the report presets: the margin's slope goes from -0.75 to -1.3 across
+#: +-10 % of H_c (quartz, level 1), |m''/m'| ~ 5.
+MARGIN_CURVATURE = 6.0
+
+#: Relative error of the fast tier's height used as a first guess [1] (its worst case on the
+#: studies' ranges is ~10 %, results/benchmarks/fast_tier.md).
+FAST_GUESS_ERROR = 0.1
 RICHARDSON_MIN_LEVEL = 1.5
 
 
@@ -312,8 +321,10 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     # (4 d_L + d_{L-1}) / 3, so each search gets 3/5 of the root-finder share.
     x_tol = 0.6 * (1.0 - DISCRETISATION_SHARE) * rtol
     coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
-    fine = _search(scene, rtol, level, x_tol, h_guess=coarse.critical_height,
-                   overshoot=2.0 * modelled_error(level - 1.0), **common)
+    fine = _search(scene, rtol, level, x_tol,
+                   h_guess=coarse.critical_height if coarse.censored is None else None,
+                   overshoot=2.0 * modelled_error(level - 1.0),
+                   slope=_margin_slope(coarse.history), **common)
     fine.evaluations += coarse.evaluations
     fine.wall_time = time.perf_counter() - start
     if fine.censored is None and coarse.censored is None:
@@ -326,11 +337,14 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
 
 
 def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
-            model=None, h_guess=None, overshoot=None):
+            model=None, h_guess=None, overshoot=None, slope=None):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
-    ``x_tol`` [1] is the root finder's tolerance on ln H. At levels >= COARSE_GAP with no
-    guess, the search starts from the root found at ``level - COARSE_GAP``.
+    ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
+    from the root found at ``level - COARSE_GAP`` (levels >= COARSE_GAP) or from the fast
+    tier's height. From a guess, secant steps on the margin (:func:`_secant`) usually
+    converge in 2-4 simulations; otherwise bracketing and Brent's method take over, reusing
+    every simulation done.
     """
     own_model = model is None
     if own_model:
@@ -350,9 +364,15 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
                          h_max=h_max, method=method, melting=melting,
                          runaway_fraction=runaway_fraction)
         coarse_evaluations = coarse.evaluations
-        h_guess = coarse.critical_height
-        # The fine root lies within the coarse level's error of the coarse root.
-        overshoot = 2.0 * modelled_error(level - COARSE_GAP)
+        if coarse.censored is None:
+            h_guess = coarse.critical_height
+            slope = _margin_slope(coarse.history)
+            # The fine root lies within the coarse level's error of the coarse root.
+            overshoot = 2.0 * modelled_error(level - COARSE_GAP)
+    elif method == "brent" and h_guess is None and own_model:
+        fast = _fast_guess(scene, h_min, h_max, melting)
+        if fast is not None:
+            h_guess, overshoot = fast, FAST_GUESS_ERROR
 
     cache = {}
 
@@ -362,9 +382,12 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         return cache[x]
 
     x_min, x_max = math.log(h_min), math.log(h_max)
+    x_root = None
     if method == "bisection":
         x_root, censored = _bisection(margin, x_min, x_max, x_tol)
-    else:
+    elif h_guess is not None:
+        x_root, censored = _secant(margin, math.log(h_guess), slope, x_tol, x_min, x_max), None
+    if x_root is None:
         x_root, censored = _brent(margin, x_min, x_max, x_tol, model, h_guess,
                                   overshoot=overshoot or 0.05)
     history = sorted((math.exp(x), m) for x, m in cache.items())
@@ -374,6 +397,77 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     base["flags"] = model.flags + model.height_flags(height)
     return HeightResult(critical_height=height, censored=censored,
                         evaluations=len(cache) + coarse_evaluations, history=history, **base)
+
+
+def _fast_guess(scene, h_min, h_max, melting):
+    """The fast tier's critical height [m] as a first guess, or None (censored or failed)."""
+    from skidmc.fast import fast_critical_height
+
+    try:
+        res = fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
+    except Exception:  # noqa: BLE001 - only a guess: the full search does not need it
+        return None
+    h = res.critical_height
+    return h if res.censored is None and math.isfinite(h) else None
+
+
+def _margin_slope(history):
+    """d margin / d ln H [1] across the sign change of a finished search's history, or None."""
+    pts = [(math.log(h), m) for h, m in history if math.isfinite(m)]
+    for (x0, m0), (x1, m1) in zip(pts, pts[1:]):
+        if m0 > 0.0 >= m1 and x1 > x0:
+            return (m1 - m0) / (x1 - x0)
+    return None
+
+
+def _secant(margin, x0, slope, x_tol, x_min, x_max, max_simulations=8):
+    """Root of the margin on ln H from a close guess ``x0``, always from a tight bracket; or None.
+
+    The margin is smooth but not linear near the root (its slope changes by ~30 % within
+    0.5 % of H_c, and it has a kink at the root itself, where the event moves from before to
+    after the exit) and carries ~1e-4 of step-size noise, so a root extrapolated from one
+    side is not trusted. Steps aim past the predicted root by ``1.5 x_tol`` so that they
+    bracket it; once a bracket [a, b] with m(a) > 0 >= m(b) is at most 4 x_tol wide, the
+    root is the linear interpolation inside it (error below the bracket width times the
+    slope's relative change, < x_tol). The first step uses ``slope`` (d margin / d ln H from
+    a coarser search; -1, the t_ev ~ 1/H scaling, when not known). Returns None when the
+    steps leave [x_min, x_max], meet a non-finite margin, or do not converge: the caller then
+    brackets and runs Brent's method, reusing every simulation.
+    """
+    slope = slope if slope is not None and slope < 0.0 else -1.0
+    push = 1.5 * x_tol
+    lo = hi = None  # (x, m) of the closest no-go (m > 0) and go (m <= 0) points
+    previous = None
+    x = x0
+    for _ in range(max_simulations):
+        if not (x_min < x < x_max):
+            return None
+        m = margin(x)
+        if not math.isfinite(m):
+            return None
+        if m > 0.0 and (lo is None or x > lo[0]):
+            lo = (x, m)
+        elif m <= 0.0 and (hi is None or x < hi[0]):
+            hi = (x, m)
+        if lo is not None and hi is not None:
+            if lo[0] >= hi[0]:
+                return None  # not monotone at this scale: leave it to Brent
+            root = lo[0] + lo[1] * (hi[0] - lo[0]) / (lo[1] - hi[1])
+            if hi[0] - lo[0] <= 4.0 * x_tol:
+                return root
+            # Shrink from the far end: step past the interpolated root, away from the
+            # nearer end, so that the new point lands on the far side's sign.
+            x = root - push if root - lo[0] > hi[0] - root else root + push
+        else:
+            # One-sided: secant (or the given slope) prediction, pushed past the root.
+            if previous is not None and x != previous[0]:
+                secant_slope = (m - previous[1]) / (x - previous[0])
+                if secant_slope < 0.0:
+                    slope = secant_slope
+            x_next = x - m / slope + (push if m > 0.0 else -push)
+            previous = (x, m)
+            x = x_next
+    return None
 
 
 def _bisection(margin, x_min, x_max, x_tol):
