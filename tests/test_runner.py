@@ -298,6 +298,16 @@ def test_identical_for_any_worker_count_and_chunk_size(tmp_path, study_file, ref
     _assert_same_data(one, reference)
     two = run_study(study_file, tmp_path / "two.h5", workers=2, chunk_size=3, progress=False)
     _assert_same_data(two, reference)
+    # Automatic (time-sized, guided) chunks, with the per-chunk record of the report.
+    report = execute_study(study_file, tmp_path / "auto.h5", workers=2, progress=False,
+                           timeline=True)
+    _assert_same_data(report.path, reference)
+    assert report.evaluated == 24 and report.chunks == len(report.timeline) >= 2
+    assert sorted(i for c in report.timeline for i in range(c["start"], c["stop"])) \
+        == list(range(12))
+    assert 1 <= len(report.worker_peak_rss_mib) <= 2
+    assert all(v > 0 for v in report.worker_peak_rss_mib.values())
+    assert 0 < report.solver_time and 0 <= report.outside_solver < 1
 
 
 @real_solver
@@ -392,3 +402,96 @@ def test_a_crashing_worker_process_costs_only_its_sample(tmp_path, study_file):
                for r in ds.failure_reason.values[:, failed].ravel())
     assert set(ds.status.values[:, ~failed].ravel()) == {"ok"}
     assert ds.attrs["complete"] == 1
+
+
+# --- evaluate_batch on worker processes (real solver) --------------------------------------------
+
+
+def test_schedule_hands_out_every_sample_once_in_order():
+    todo = np.ones(50, dtype=bool)
+    todo[[3, 4, 20]] = False  # done already (a resumed run)
+    fixed = runner._Schedule(todo, 4, 2, chunk_size=7)
+    chunks = []
+    while fixed:
+        chunks.append(fixed.next())
+    assert [i for a, b in chunks for i in range(a, b)] == list(np.flatnonzero(todo))
+    assert max(b - a for a, b in chunks) == 7 and fixed.remaining == 0
+    timed = runner._Schedule(np.ones(2000, dtype=bool), 4, 2)
+    sizes = []
+    while timed:
+        a, b = timed.next()
+        sizes.append(b - a)
+        timed.observe(b - a, 0.004 * (b - a))  # 4 ms a sample
+    assert sum(sizes) == 2000 and sizes[0] == 2  # FIRST_CHUNK_EVALUATIONS / 4 scenes
+    assert sizes[1] == 125  # TARGET_CHUNK_SECONDS of work at 4 ms a sample
+    shortest = math.ceil(runner.MIN_CHUNK_SECONDS / 0.004)  # guided: short chunks at the end
+    assert min(sizes[1:-1]) == shortest and sizes[-1] <= shortest
+    assert sizes[-10:] == sorted(sizes[-10:], reverse=True)
+
+
+_ROWS = [{"mu": 0.132}, {"mu": 0.12}, {"mu": -1.0}, {"mu": 0.15}, {"mu": 0.11}, {"mu": 0.14},
+         {"mu": 0.125}]
+
+
+def _assert_same_batch(a, b):
+    assert list(a.status) == list(b.status)
+    assert np.array_equal(a.critical_height, b.critical_height, equal_nan=True)  # bitwise
+    assert np.array_equal(a.evaluations, b.evaluations)
+    assert list(a.flags) == list(b.flags) and list(a.failure_reason) == list(b.failure_reason)
+    for k in a.inputs:
+        assert np.array_equal(a.inputs[k], b.inputs[k], equal_nan=True), k
+
+
+@real_solver
+def test_evaluate_batch_on_workers_identical_ordered_isolated():
+    options = {"rtol": 1e-2}
+    try:
+        one = evaluate_batch(_ROWS, options, base="paper-quartz")
+        two = evaluate_batch(_ROWS, options, base="paper-quartz", workers=2, chunk_size=2)
+        _assert_same_batch(one, two)
+        assert list(two.status) == ["ok", "ok", "failed", "ok", "ok", "ok", "ok"]
+        assert two.failure_reason[2].startswith("invalid inputs: SceneError")
+        assert two.inputs["mu"][2] == -1.0
+        # Order: heights fall as mu rises, row by row as given.
+        ok = two.status == "ok"
+        mu, h = two.inputs["mu"][ok], two.critical_height[ok]
+        assert np.array_equal(np.argsort(mu), np.argsort(-h))
+        assert np.all(two.wall_time[ok] > 0)
+        # The pool stays warm for the next call: Scene objects, automatic chunks, censoring.
+        pool = runner._POOLS[2]
+        quartz = get_preset("paper-quartz")
+        scenes = [quartz.replace(mu=r["mu"]) for r in _ROWS if r["mu"] > 0][::-1]
+        capped = {"rtol": 1e-2, "h_max": float(np.nanmedian(one.critical_height))}
+        inline = evaluate_batch(scenes, capped)
+        pooled = evaluate_batch(scenes, capped, workers=2)
+        assert runner._POOLS[2] is pool
+        _assert_same_batch(inline, pooled)
+        assert "censored_above" in set(pooled.status) and "ok" in set(pooled.status)
+    finally:
+        runner.shutdown_workers()
+    assert not runner._POOLS
+
+
+_BATCH_SCRIPT = """
+import json, sys
+from skidmc.runner import evaluate_batch
+if __name__ == "__main__":
+    rows = [{"mu": m} for m in (0.10, 0.12, 0.145, 0.13, 0.16, 0.11)]
+    res = evaluate_batch(rows, {"rtol": 1e-2}, base="paper-quartz", workers=2, chunk_size=2)
+    print(json.dumps({"status": list(res.status), "reason": list(res.failure_reason),
+                      "mu": list(res.inputs["mu"])}))
+"""
+
+
+def test_evaluate_batch_survives_a_crashing_worker(tmp_path):
+    (tmp_path / "sitecustomize.py").write_text(_CRASHING_SOLVER)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), str(ROOT / "src"),
+                                                      env.get("PYTHONPATH")]))
+    proc = subprocess.run([sys.executable, "-c", _BATCH_SCRIPT], env=env, capture_output=True,
+                          text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr
+    out = __import__("json").loads(proc.stdout.strip().splitlines()[-1])
+    assert out["mu"] == [0.10, 0.12, 0.145, 0.13, 0.16, 0.11]  # order kept
+    assert out["status"] == ["ok", "ok", "failed", "ok", "failed", "ok"]
+    assert all("worker process died" in out["reason"][i] for i in (2, 4))

@@ -4,7 +4,9 @@ Two levels:
 
 * :func:`evaluate_batch` evaluates any batch of scenes (or input rows on a base scene) that a
   caller hands it and returns one status per sample; nothing about designs or files. Adaptive
-  methods (subset simulation, importance sampling) call it with the batch they chose.
+  methods (subset simulation, importance sampling) call it with the batch they chose. With
+  ``workers > 1`` the batch goes in chunks to local worker processes that stay warm between
+  calls (:func:`shutdown_workers` ends them), through the same chunk machinery as a study.
 * :func:`run_study` (``skidmc run``) draws a study's design chunk by chunk
   (:class:`skidmc.sampling.StudySampler`), sends the chunks to local worker processes
   (:class:`concurrent.futures.ProcessPoolExecutor`, spawn start method) or to a
@@ -16,6 +18,19 @@ Sample i gets the same inputs and, the solver being deterministic, the same resu
 worker count, chunk size, scheduler or interruptions: inputs come from the design by index, and
 chunks only decide who computes what.
 
+Worker processes. Local workers are started with the ``forkserver`` method where the platform
+has it (else ``spawn``): one server process imports numpy, numba, scipy and skidmc once and every
+worker is forked from it, so a worker (also one that replaces a crashed worker) starts in
+milliseconds instead of re-importing everything; each worker then loads the compiled kernels
+from numba's cache once (a small warm-up solve), before its first chunk. :func:`execute_study`
+launches its workers before it loads the study and opens the result file, so that their start
+overlaps the parent's own preparation.
+
+Chunks. Unless a chunk size is given, chunks are sized by time (guided self-scheduling): about
+:data:`TARGET_CHUNK_SECONDS` of solver work each, measured as results come back, shrinking toward
+the end of a run so that the workers finish together; the parent draws the design in blocks of
+:data:`DRAW_BLOCK` samples rather than once per chunk.
+
 Every sample ends with a status: ``ok``, ``censored_above`` / ``censored_below`` (the critical
 height lies beyond the search bounds; the bound is stored), or ``failed`` with the exception
 that stopped it (height NaN). A failing sample never stops the run, nor is it dropped or imputed.
@@ -26,6 +41,7 @@ kills a worker again, recorded as failed.
 from __future__ import annotations
 
 import argparse
+import atexit
 import concurrent.futures as cf
 import dataclasses
 import math
@@ -58,11 +74,25 @@ __all__ = [
     "execute_study",
     "main_run",
     "run_study",
+    "shutdown_workers",
 ]
 
-#: Longest chunk, in scene evaluations (samples x scenes): small enough for a steady progress
-#: bar and little lost work on interruption, large enough that scheduling costs nothing.
-MAX_CHUNK_EVALUATIONS = 64
+#: Longest chunk, in scene evaluations (samples x scenes): bounds a chunk's memory and the work
+#: lost on interruption whatever the solver's speed.
+MAX_CHUNK_EVALUATIONS = 16384
+
+#: Solver work per chunk aimed at [s] when the chunk size is automatic: long enough that the
+#: per-chunk costs (pickling, drawing, writing: ~10-20 ms) are a few percent of one core, short
+#: enough for a steady progress bar and little lost work on interruption.
+TARGET_CHUNK_SECONDS = 0.5
+
+#: Shortest automatic chunk [s of solver work] (the tail of a run), and the evaluations in each
+#: worker's first chunks, sized before any timing is known.
+MIN_CHUNK_SECONDS = 0.05
+FIRST_CHUNK_EVALUATIONS = 8
+
+#: Samples the parent draws from the design at once (then hands out slices as chunks).
+DRAW_BLOCK = 1024
 
 
 @dataclasses.dataclass
@@ -133,8 +163,36 @@ def _solve(critical_height, scene: Scene, kwargs: dict) -> tuple[float, str, int
     return h, status, evaluations, flags, ""
 
 
+def _solver_kwargs(solver_options) -> dict:
+    """SolverOptions or mapping -> plain keyword arguments (picklable without skidmc.study)."""
+    if hasattr(solver_options, "as_kwargs"):  # a SolverOptions
+        return dict(solver_options.as_kwargs())
+    return dict(solver_options or {})
+
+
+def _empty_result(m: int) -> BatchResult:
+    return BatchResult(
+        critical_height=np.full(m, np.nan), status=np.full(m, "failed", dtype=object),
+        evaluations=np.zeros(m, dtype=np.int32), flags=np.full(m, "", dtype=object),
+        failure_reason=np.full(m, "", dtype=object), wall_time=np.zeros(m),
+        inputs={k: np.full(m, np.nan) for k in NUMERIC_KEYS},
+    )
+
+
+def _record_given(out: BatchResult, i: int, row, base_values: dict) -> None:
+    """Inputs of sample i as given (a row whose scene was never built)."""
+    if isinstance(row, Scene):
+        given = row.as_dict()
+    else:
+        given = {**base_values, **(row if isinstance(row, Mapping) else {})}
+    for k in NUMERIC_KEYS:
+        if isinstance(given.get(k), (int, float)):
+            out.inputs[k][i] = given[k]
+
+
 def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None, *,
-                   base: Scene | str | None = None) -> BatchResult:
+                   base: Scene | str | None = None, workers: int | None = 1,
+                   chunk_size: int | None = None, scheduler=None) -> BatchResult:
     """Critical heights of any batch of scenes, one status per sample, never raising for one.
 
     Parameters
@@ -147,41 +205,48 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         Keyword arguments of :func:`skidmc.solver.critical_height` (default: its defaults).
     base : Scene or str, optional
         Scene or preset name the mapping rows override; without it rows must be complete.
+    workers : int or None
+        1 (default): evaluate in this process. More: local worker processes, started on the
+        first such call and kept warm for later calls with the same count (end them with
+        :func:`shutdown_workers`; they also end with this process). None: all CPUs available.
+    chunk_size : int, optional
+        Samples per chunk sent to a worker (default: sized by time, see the module docstring).
+        Does not change any result.
+    scheduler : str or distributed.Client, optional
+        ``"dask"`` or a dask Client/address instead of local processes (as in
+        :func:`run_study`).
 
     Returns
     -------
     BatchResult
-        In the batch's order. Invalid inputs and solver exceptions give status ``failed`` with
-        the reason; nothing is dropped.
+        In the batch's order, the same for any `workers`, `chunk_size` or `scheduler`. Invalid
+        inputs and solver exceptions give status ``failed`` with the reason; nothing is dropped;
+        a sample that kills its worker process is retried alone and, if it kills it again,
+        recorded as failed (``worker process died ...``).
     """
-    from skidmc.solver import critical_height
-
-    if hasattr(solver_options, "as_kwargs"):  # a SolverOptions
-        kwargs = solver_options.as_kwargs()
-    else:
-        kwargs = dict(solver_options or {})
+    kwargs = _solver_kwargs(solver_options)
     if isinstance(base, str):
         from skidmc.presets import get_preset
 
         base = get_preset(base)
     rows = _rows(scenes)
+    if workers == 1 and scheduler in (None, "local"):
+        return _evaluate_rows(rows, kwargs, base)
+    return _evaluate_rows_parallel(rows, kwargs, base, workers, chunk_size, scheduler)
+
+
+def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None) -> BatchResult:
+    """evaluate_batch in this process."""
+    from skidmc.solver import critical_height
+
     m = len(rows)
-    out = BatchResult(
-        critical_height=np.full(m, np.nan), status=np.empty(m, dtype=object),
-        evaluations=np.zeros(m, dtype=np.int32), flags=np.full(m, "", dtype=object),
-        failure_reason=np.full(m, "", dtype=object), wall_time=np.zeros(m),
-        inputs={k: np.full(m, np.nan) for k in NUMERIC_KEYS},
-    )
+    out = _empty_result(m)
     base_values = base.as_dict() if base is not None else {}
     for i, row in enumerate(rows):
         try:
             scene = row if isinstance(row, Scene) else make_scene(row, preset=base)
         except Exception as exc:  # noqa: BLE001 - an invalid sample fails alone, not the run
-            given = {**base_values, **(row if isinstance(row, Mapping) else {})}
-            for k in NUMERIC_KEYS:
-                if isinstance(given.get(k), (int, float)):
-                    out.inputs[k][i] = given[k]
-            out.status[i] = "failed"
+            _record_given(out, i, row, base_values)
             out.failure_reason[i] = f"invalid inputs: {type(exc).__name__}: {exc}"
             continue
         values = scene.as_dict()
@@ -194,40 +259,142 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
     return out
 
 
+def _evaluate_rows_parallel(rows: list, kwargs: dict, base: Scene | None, workers,
+                            chunk_size, scheduler) -> BatchResult:
+    """evaluate_batch through the chunk machinery of a study run (warm local pool or dask)."""
+    m = len(rows)
+    out = _empty_result(m)
+    if m == 0:
+        return out
+    if scheduler in (None, "local"):
+        executor, owned = _shared_pool(workers or _default_workers()), False
+    else:
+        executor, owned = _Dask(None if scheduler == "dask" else scheduler, workers), True
+
+    def make_chunk(start: int, stop: int, isolated: bool):
+        return _Chunk(start, stop, (base,), [rows[start:stop]], kwargs, isolated), None
+
+    def consume(chunk: _Chunk, _context, results: list[BatchResult], _out) -> None:
+        (res,) = results
+        sl = slice(chunk.start, chunk.stop)
+        for name in ("critical_height", "status", "evaluations", "flags", "failure_reason",
+                     "wall_time"):
+            getattr(out, name)[sl] = getattr(res, name)
+        for k in NUMERIC_KEYS:
+            out.inputs[k][sl] = res.inputs[k]
+
+    todo = np.ones(m, dtype=bool)
+    try:
+        _run_chunks(executor, _Schedule(todo, 1, executor.workers, chunk_size,
+                                        balance=executor.workers > 1),
+                    make_chunk, consume)
+    finally:
+        if owned:
+            executor.shutdown()
+    return out
+
+
 # --- chunks -----------------------------------------------------------------------------------
 
 
 @dataclasses.dataclass
 class _Chunk:
-    """What a worker needs for samples ``start:stop``: base scenes and each scene's overrides."""
+    """What a worker needs for samples ``start:stop``: base scenes and each scene's overrides.
+
+    `overrides[j]` holds scene j's inputs: columns ``{key: array}`` (a study) or a list of rows
+    (Scene objects or mappings; :func:`evaluate_batch`). `options` are plain keyword arguments,
+    so that a worker never imports :mod:`skidmc.study` (scipy.stats) to unpickle a chunk.
+    """
 
     start: int
     stop: int
-    scenes: tuple[Scene, ...]
-    overrides: list[dict[str, np.ndarray]]
-    options: SolverOptions
+    scenes: tuple[Scene | None, ...]
+    overrides: list
+    options: dict
     isolated: bool = False  # a retry of one sample after a worker died
 
 
-def _evaluate_chunk(chunk: _Chunk) -> list[BatchResult]:
+@dataclasses.dataclass
+class _ChunkOut:
+    """A chunk's results and where/when it was computed (for the run report)."""
+
+    results: list[BatchResult]
+    pid: int | None = None
+    peak_rss_mib: float = math.nan  # the worker's peak resident memory so far
+    began: float = math.nan  # time.time() in the worker
+    ended: float = math.nan
+
+
+def _peak_rss_mib() -> float:
+    """Peak resident memory of this process [MiB] (nan where the platform cannot tell)."""
+    try:
+        import resource
+    except ImportError:  # not on Unix
+        return math.nan
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, else KiB
+
+
+def _evaluate_chunk(chunk: _Chunk) -> _ChunkOut:
     """Worker entry point (module level: picklable for processes and dask)."""
-    return [evaluate_batch(ov, chunk.options, base=sc)
-            for sc, ov in zip(chunk.scenes, chunk.overrides)]
+    began = time.time()
+    results = [_evaluate_rows(_rows(ov), chunk.options, sc)
+               for sc, ov in zip(chunk.scenes, chunk.overrides)]
+    return _ChunkOut(results, os.getpid(), _peak_rss_mib(), began, time.time())
+
+
+def _worker_probe(_=None) -> tuple[int, float, float]:
+    """(pid, peak RSS, current RSS [MiB]) of the worker that runs it (benchmarks/throughput.py);
+    the current RSS is nan where /proc is missing."""
+    try:
+        with open("/proc/self/statm") as f:
+            rss = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, AttributeError):
+        rss = math.nan
+    return os.getpid(), _peak_rss_mib(), rss
 
 
 def _failed_results(chunk: _Chunk, reason: str) -> list[BatchResult]:
     """Results marking every sample of a chunk failed (the worker died), inputs as given."""
     out = []
+    m = chunk.stop - chunk.start
     for sc, ov in zip(chunk.scenes, chunk.overrides):
-        m = chunk.stop - chunk.start
-        inputs = {k: np.full(m, v) for k, v in sc.as_dict().items() if k in NUMERIC_KEYS}
-        inputs.update({k: np.asarray(v, dtype=float) for k, v in ov.items()})
-        out.append(BatchResult(
-            critical_height=np.full(m, np.nan), status=np.full(m, "failed", dtype=object),
-            evaluations=np.zeros(m, dtype=np.int32), flags=np.full(m, "", dtype=object),
-            failure_reason=np.full(m, reason, dtype=object), wall_time=np.zeros(m),
-            inputs=inputs))
+        res = _empty_result(m)
+        res.failure_reason[:] = reason
+        if isinstance(ov, Mapping):  # a study's columns on a base scene
+            for k, v in sc.as_dict().items():
+                if k in NUMERIC_KEYS:
+                    res.inputs[k][:] = v
+            for k, v in ov.items():
+                res.inputs[k] = np.asarray(v, dtype=float)
+        else:  # evaluate_batch rows
+            base_values = sc.as_dict() if sc is not None else {}
+            for i, row in enumerate(ov):
+                _record_given(res, i, row, base_values)
+        out.append(res)
     return out
+
+
+def _warm_worker(warm_up: dict | None) -> None:
+    """Initializer of a local worker: import the solver, load its compiled kernels once.
+
+    A small solve (paper-quartz at the given options) makes numba load the kernels from its
+    cache (or compile them) now rather than in the first sample; its result is discarded, and
+    nothing it does can fail the worker.
+    """
+    try:
+        from skidmc.solver import critical_height
+
+        if warm_up is not None:
+            from skidmc.presets import get_preset
+
+            critical_height(get_preset("paper-quartz"), **warm_up)
+    except Exception:  # noqa: BLE001, S110 - a warm-up only; the samples report any error
+        pass
+
+
+def _ping(_=None) -> int:
+    return os.getpid()
 
 
 class _Inline:
@@ -253,19 +420,47 @@ class _Inline:
         pass
 
 
+#: Warm-up options of a worker (the cheapest full-tier solve that loads every kernel).
+_WARM_UP = {"rtol": 0.1, "tier": "full"}
+
+
+def _mp_context():
+    """forkserver where available (workers forked from one warm server process), else spawn."""
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        # Modules the server imports once, before forking any worker (no effect once running).
+        # Not skidmc.runner itself: `python -m skidmc.runner` re-runs it as the workers' main
+        # module, which runpy warns about when it is imported already; its imports are these.
+        ctx.set_forkserver_preload(["__main__", "skidmc.presets", "skidmc.solver"])
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
 class _Processes:
-    """Local worker processes (spawn: safe with threads, the same on every platform)."""
+    """Local worker processes (forkserver or spawn: safe with threads in the parent)."""
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
         self._pool = self._new()
 
     def _new(self):
-        return cf.ProcessPoolExecutor(self.workers,
-                                      mp_context=multiprocessing.get_context("spawn"))
+        pool = cf.ProcessPoolExecutor(self.workers, mp_context=_mp_context(),
+                                      initializer=_warm_worker, initargs=(_WARM_UP,))
+        # Start every worker now (the pool would start them one per submitted task), so that
+        # they import and warm up while the caller prepares its first chunks.
+        for _ in range(self.workers):
+            pool.submit(_ping)
+        return pool
 
     def submit(self, fn, arg):
-        return self._pool.submit(fn, arg)
+        try:
+            return self._pool.submit(fn, arg)
+        except cf.process.BrokenProcessPool as exc:
+            # A worker died since the last results came back: the task fails as the ones in
+            # flight do, and the caller's retry logic takes it from there.
+            fut = cf.Future()
+            fut.set_exception(exc)
+            return fut
 
     def wait_first(self, futures):
         return cf.wait(futures, return_when=cf.FIRST_COMPLETED).done
@@ -276,6 +471,141 @@ class _Processes:
 
     def shutdown(self):
         self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+#: Warm local pools of evaluate_batch (and of runs that find one), by worker count.
+_POOLS: dict[int, _Processes] = {}
+
+
+def _shared_pool(workers: int) -> _Processes:
+    pool = _POOLS.get(workers)
+    if pool is None:
+        pool = _POOLS[workers] = _Processes(workers)
+    return pool
+
+
+def shutdown_workers() -> None:
+    """End the warm local worker processes that :func:`evaluate_batch` keeps between calls."""
+    while _POOLS:
+        _, pool = _POOLS.popitem()
+        pool.shutdown()
+
+
+atexit.register(shutdown_workers)
+
+
+class _Schedule:
+    """Which samples go in the next chunk: the samples still to do, in order, in chunks.
+
+    With a fixed `chunk_size`, chunks of that many samples. Otherwise sized by time: the first
+    chunks hold :data:`FIRST_CHUNK_EVALUATIONS` evaluations; then each holds about
+    :data:`TARGET_CHUNK_SECONDS` of work at the measured seconds per sample, and, with
+    `balance` (several workers), at most a 1/(3 x workers) share of what is left (guided
+    self-scheduling), but no less than :data:`MIN_CHUNK_SECONDS`, so the last chunks are short
+    and the workers finish together.
+    """
+
+    def __init__(self, todo: np.ndarray, per_sample: int, workers: int,
+                 chunk_size: int | None = None, balance: bool = True) -> None:
+        idx = np.flatnonzero(todo)
+        breaks = np.flatnonzero(np.diff(idx) > 1) + 1
+        self._segments = deque((int(seg[0]), int(seg[-1]) + 1)
+                               for seg in np.split(idx, breaks) if len(seg))
+        self.remaining = len(idx)
+        self._per_sample = max(1, per_sample)
+        self._workers = max(1, workers)
+        self._fixed = chunk_size
+        self._balance = balance
+        self._samples = 0  # measured so far
+        self._seconds = 0.0
+
+    def __bool__(self) -> bool:
+        return bool(self._segments)
+
+    def observe(self, samples: int, seconds: float) -> None:
+        """Record that a chunk of `samples` took `seconds` of worker time."""
+        if samples > 0 and math.isfinite(seconds) and seconds >= 0:
+            self._samples += samples
+            self._seconds += seconds
+
+    def _size(self) -> int:
+        if self._fixed:
+            return int(self._fixed)
+        cap = max(1, MAX_CHUNK_EVALUATIONS // self._per_sample)
+        if self._samples == 0 or self._seconds <= 0:
+            return min(cap, max(1, -(-FIRST_CHUNK_EVALUATIONS // self._per_sample)))
+        per = self._seconds / self._samples
+        size = math.ceil(TARGET_CHUNK_SECONDS / per)
+        if self._balance:
+            size = min(size, math.ceil(self.remaining / (3 * self._workers)))
+            size = max(size, math.ceil(MIN_CHUNK_SECONDS / per))
+        return max(1, min(size, cap))
+
+    def next(self) -> tuple[int, int] | None:
+        """(start, stop) of the next chunk; None when every sample has been handed out."""
+        if not self._segments:
+            return None
+        start, end = self._segments[0]
+        stop = min(end, start + self._size())
+        if stop == end:
+            self._segments.popleft()
+        else:
+            self._segments[0] = (stop, end)
+        self.remaining -= stop - start
+        return start, stop
+
+
+def _run_chunks(executor, schedule: _Schedule, make_chunk, consume) -> None:
+    """Send the schedule's chunks to `executor`; `consume` each one's results as it is back.
+
+    ``make_chunk(start, stop, isolated) -> (_Chunk, context)`` builds a chunk;
+    ``consume(chunk, context, results, out)`` takes its list of BatchResult (one per scene) and
+    the :class:`_ChunkOut` (timing, worker). At most two chunks per worker are in flight, so
+    memory does not grow with n. When a worker process dies (BrokenProcessPool, dask's
+    KilledWorker) the chunks it took down are retried one sample at a time, each alone in
+    flight, so that a sample that kills its worker again is known to be the culprit and is
+    recorded as failed while every other sample is evaluated.
+    """
+    in_flight: dict = {}
+    retry: deque = deque()  # single samples to rerun alone after a worker died
+
+    def submit(start: int, stop: int, isolated: bool = False) -> None:
+        chunk, context = make_chunk(start, stop, isolated)
+        in_flight[executor.submit(_evaluate_chunk, chunk)] = (chunk, context)
+
+    while schedule or retry or in_flight:
+        if retry and not in_flight:
+            submit(*retry.popleft(), isolated=True)
+        while schedule and not retry and len(in_flight) < 2 * executor.workers:
+            submit(*schedule.next())
+        for fut in executor.wait_first(list(in_flight)):
+            if fut not in in_flight:  # requeued after a worker died
+                continue
+            chunk, context = in_flight.pop(fut)
+            try:
+                out = fut.result()
+            except Exception as exc:
+                if not _worker_died(exc):
+                    raise
+                if not chunk.isolated:
+                    retry.extend((i, i + 1) for i in range(chunk.start, chunk.stop))
+                    for other, (lost, _) in list(in_flight.items()):
+                        if not (other.done() and other.exception() is None):
+                            in_flight.pop(other)  # taken down with the pool: rerun alone
+                            retry.extend((i, i + 1) for i in range(lost.start, lost.stop))
+                    executor.restart()
+                    continue
+                executor.restart()
+                out = _ChunkOut(_failed_results(chunk, "worker process died while evaluating "
+                                                f"this sample ({exc!r})"))
+            if not isinstance(out, _ChunkOut):  # a bare list of results
+                out = _ChunkOut(list(out))
+            if not chunk.isolated:
+                seconds = out.ended - out.began
+                if not math.isfinite(seconds):
+                    seconds = sum(float(r.wall_time.sum()) for r in out.results)
+                schedule.observe(chunk.stop - chunk.start, seconds)
+            consume(chunk, context, out.results, out)
 
 
 class _Dask:
@@ -348,11 +678,22 @@ class RunReport:
     status_counts : dict
         Status -> count, over this run's evaluations.
     wall_time : float
-        Wall time of the evaluation loop [s].
+        Wall time the workers were there for [s]: from the launch of the local worker processes
+        (which overlaps the loading of the study and the opening of the file) or, in process
+        and on dask, from the first chunk, to the last result written.
     solver_time : float
         Sum of the per-sample solver wall times [s].
     workers : int
         Parallel slots used.
+    chunks : int
+        Chunks evaluated.
+    worker_peak_rss_mib : dict
+        Worker process id -> its peak resident memory [MiB] (local processes and dask workers;
+        in process: this process).
+    timeline : list of dict or None
+        With ``execute_study(..., timeline=True)``: per chunk, its samples, worker, solver time
+        and the times [s from the start of `wall_time`] it was sent, began and ended in the
+        worker, and was written.
     """
 
     path: Path
@@ -363,6 +704,9 @@ class RunReport:
     wall_time: float = 0.0
     solver_time: float = 0.0
     workers: int = 1
+    chunks: int = 0
+    worker_peak_rss_mib: dict = dataclasses.field(default_factory=dict)
+    timeline: list | None = None
 
     @property
     def rate(self) -> float:
@@ -378,9 +722,12 @@ class RunReport:
     def summary(self) -> str:
         """One line for the terminal and the file's history."""
         counts = ", ".join(f"{k} {v}" for k, v in sorted(self.status_counts.items()))
+        peak = max(self.worker_peak_rss_mib.values(), default=math.nan)
+        memory = f", peak {peak:.0f} MiB per worker" if math.isfinite(peak) else ""
         return (f"{self.evaluated} evaluations in {self.wall_time:.1f} s "
                 f"({self.rate:.1f}/s on {self.workers} workers, "
-                f"{100 * self.outside_solver:.1f}% outside the solver); {counts or 'nothing to do'}")
+                f"{100 * self.outside_solver:.1f}% outside the solver{memory}); "
+                f"{counts or 'nothing to do'}")
 
 
 def _resolve_out(study: Study, out) -> Path:
@@ -434,127 +781,142 @@ def _open_result_file(study: Study, path: Path, resume: bool) -> EnsembleFile:
 
 
 def _executor(scheduler, use_dask: bool, workers: int | None):
+    """(executor, owned): owned executors are shut down after the run; a warm pool that
+    :func:`evaluate_batch` left running is used as it is and left running."""
     if scheduler in (None, "local") and not use_dask:
         slots = workers or _default_workers()
-        return _Inline() if slots == 1 else _Processes(slots)
-    return _Dask(None if scheduler == "local" else scheduler, workers)
+        if slots == 1:
+            return _Inline(), True
+        if slots in _POOLS:
+            return _POOLS[slots], False
+        return _Processes(slots), True
+    return _Dask(None if scheduler == "local" else scheduler, workers), True
 
 
 def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None = None,
                   workers: int | None = None, scheduler=None, use_dask: bool = False,
                   resume: bool = False, progress: bool | None = None,
-                  chunk_size: int | None = None, command: str | None = None) -> RunReport:
+                  chunk_size: int | None = None, command: str | None = None,
+                  timeline: bool = False) -> RunReport:
     """Run a study to its result file; like :func:`run_study` but returns a :class:`RunReport`.
 
     See :func:`run_study` for the parameters; in addition `chunk_size` sets the samples per chunk
-    (default: from the worker count, at most :data:`MAX_CHUNK_EVALUATIONS` evaluations) and
-    `command` is the command line recorded in the file's history.
+    (default: sized by time, see the module docstring), `command` is the command line recorded
+    in the file's history, and `timeline` records per-chunk timings in the report.
     """
     from skidmc import __version__
-    from skidmc.storage import timestamp
-    from skidmc.study import Study, load_study
 
-    if not isinstance(study, Study):
-        study = load_study(study)
-    if n is not None:
-        study = study.with_n(n)
-    path = _resolve_out(study, out)
-    command = command or f"run_study({study.file!r}, n={study.design.n})"
-    report = RunReport(path=path, n_rows=study.n_rows, n_scenes=len(study.scenes))
-    with _open_result_file(study, path, resume) as file:
-        done = file.done()
-        todo = int(np.count_nonzero(~done))
-        if todo:
-            file.add_history(f"{timestamp()} skidmc {__version__}: {command}: started with "
-                             f"{study.n_rows - todo} of {study.n_rows} samples written")
-            executor = _executor(scheduler, use_dask, workers)
-            report.workers = executor.workers
-            if chunk_size is None:
-                chunk_size = max(1, min(MAX_CHUNK_EVALUATIONS // len(study.scenes),
-                                        math.ceil(todo / (8 * executor.workers))))
-            ranges = deque((s, min(s + chunk_size, study.n_rows))
-                           for s in range(0, study.n_rows, chunk_size)
-                           if not done[s:s + chunk_size].all())
-            del done
-            outcome = "interrupted"
-            try:
-                _evaluate_chunks(study, file, executor, ranges, report, progress)
-                outcome = "finished"
-            finally:
-                executor.shutdown()
-                file.add_history(f"{timestamp()} skidmc {__version__}: {outcome}: "
-                                 f"{report.summary()}")
-        if not file.complete and file.done().all():
-            file.mark_complete()
+    # Local worker processes start first, so that their start-up overlaps the loading of the
+    # study and the opening of the file (they are shut down below if there is nothing to do).
+    executor, t0 = None, None
+    if scheduler in (None, "local") and not use_dask and (workers or _default_workers()) > 1:
+        executor, owned = _executor(scheduler, use_dask, workers)
+        t0 = time.perf_counter()
+    try:
+        from skidmc.storage import timestamp
+        from skidmc.study import Study, load_study
+
+        if not isinstance(study, Study):
+            study = load_study(study)
+        if n is not None:
+            study = study.with_n(n)
+        path = _resolve_out(study, out)
+        command = command or f"run_study({study.file!r}, n={study.design.n})"
+        report = RunReport(path=path, n_rows=study.n_rows, n_scenes=len(study.scenes),
+                           timeline=[] if timeline else None)
+        with _open_result_file(study, path, resume) as file:
+            todo = ~file.done()
+            if todo.any():
+                file.add_history(f"{timestamp()} skidmc {__version__}: {command}: started with "
+                                 f"{study.n_rows - int(todo.sum())} of {study.n_rows} samples "
+                                 "written")
+                if executor is None:
+                    executor, owned = _executor(scheduler, use_dask, workers)
+                report.workers = executor.workers
+                schedule = _Schedule(todo, len(study.scenes), executor.workers, chunk_size,
+                                     balance=executor.workers > 1)
+                del todo
+                outcome = "interrupted"
+                try:
+                    _evaluate_chunks(study, file, executor, schedule, report, progress, t0)
+                    outcome = "finished"
+                finally:
+                    file.add_history(f"{timestamp()} skidmc {__version__}: {outcome}: "
+                                     f"{report.summary()}")
+            if not file.complete and file.done().all():
+                file.mark_complete()
+    finally:
+        if executor is not None and owned:
+            executor.shutdown()
     return report
 
 
-def _evaluate_chunks(study: Study, file: EnsembleFile, executor, ranges: deque,
-                     report: RunReport, progress: bool | None) -> None:
-    """Send the chunks `ranges` to `executor` and write each one as soon as it is back.
+class _Draws:
+    """The study's design drawn in blocks of :data:`DRAW_BLOCK` samples, handed out in slices."""
 
-    At most two chunks per worker are in flight, so memory does not grow with n. When a worker
-    process dies (BrokenProcessPool, dask's KilledWorker) the chunks it took down are retried one
-    sample at a time, each alone in flight, so that a sample that kills its worker again is
-    known to be the culprit and is recorded as failed while every other sample is evaluated.
-    """
+    def __init__(self, sampler, n_rows: int) -> None:
+        self._sampler, self._n_rows = sampler, n_rows
+        self._start, self._stop, self._block = 0, 0, []
+
+    def __call__(self, start: int, stop: int) -> list[dict]:
+        if not (self._start <= start and stop <= self._stop):
+            end = max(stop, min(start + DRAW_BLOCK, self._n_rows))
+            self._start, self._stop = start, end
+            self._block = self._sampler.draw(start, end)
+        a, b = start - self._start, stop - self._start
+        return [{k: v[a:b] for k, v in d.items()} for d in self._block]
+
+
+def _evaluate_chunks(study: Study, file: EnsembleFile, executor, schedule: _Schedule,
+                     report: RunReport, progress: bool | None, t0: float | None = None) -> None:
+    """Send the study's chunks to `executor` (:func:`_run_chunks`) and write each one as soon
+    as it is back; `t0` is when the workers were launched (default: now)."""
     from tqdm.auto import tqdm
 
     from skidmc.sampling import StudySampler
 
-    sampler = StudySampler(study)
+    draws = _Draws(StudySampler(study), study.n_rows)
     base_scenes = tuple(sc.scene for sc in study.scenes)
+    options = _solver_kwargs(study.solver)
     n_scenes = len(base_scenes)
     names = [spec.name for spec in file.variables]
+    t0 = time.perf_counter() if t0 is None else t0
+    t_wall = time.time() - (time.perf_counter() - t0)  # t0 on the clock the workers share
 
-    def submit(start: int, stop: int, isolated: bool = False) -> None:
-        draws = sampler.draw(start, stop)
-        overrides = [{k: v for k, v in d.items() if k in SI_UNITS} for d in draws]
-        chunk = _Chunk(start, stop, base_scenes, overrides, study.solver, isolated)
-        in_flight[executor.submit(_evaluate_chunk, chunk)] = (draws, chunk)
+    def make_chunk(start: int, stop: int, isolated: bool):
+        drawn = draws(start, stop)
+        overrides = [{k: v for k, v in d.items() if k in SI_UNITS} for d in drawn]
+        chunk = _Chunk(start, stop, base_scenes, overrides, options, isolated)
+        return chunk, (drawn, time.perf_counter() - t0)
 
-    todo = sum(b - a for a, b in ranges)
-    bar = tqdm(total=study.n_rows * n_scenes, initial=(study.n_rows - todo) * n_scenes,
-               unit="sample", desc=study.name, file=sys.stderr, dynamic_ncols=True,
+    def consume(chunk: _Chunk, context, results: list[BatchResult], out: _ChunkOut) -> None:
+        drawn, sent = context
+        file.write_chunk(chunk.start, chunk.stop,
+                         _columns(names, study.scene_dimension, drawn, results))
+        m = (chunk.stop - chunk.start) * n_scenes
+        report.evaluated += m
+        report.chunks += 1
+        solver = sum(float(res.wall_time.sum()) for res in results)
+        report.solver_time += solver
+        for res in results:
+            for s in res.status:
+                report.status_counts[s] = report.status_counts.get(s, 0) + 1
+        if out.pid is not None and math.isfinite(out.peak_rss_mib):
+            report.worker_peak_rss_mib[out.pid] = max(
+                out.peak_rss_mib, report.worker_peak_rss_mib.get(out.pid, 0.0))
+        if report.timeline is not None:
+            report.timeline.append({
+                "start": chunk.start, "stop": chunk.stop, "evaluations": m, "pid": out.pid,
+                "solver_s": solver, "sent_s": sent, "began_s": out.began - t_wall,
+                "ended_s": out.ended - t_wall, "written_s": time.perf_counter() - t0})
+        bar.update(m)
+
+    bar = tqdm(total=study.n_rows * n_scenes, initial=(study.n_rows - schedule.remaining)
+               * n_scenes, unit="sample", desc=study.name, file=sys.stderr, dynamic_ncols=True,
                smoothing=0.05, disable=True if progress is False else
                (None if progress is None else False))  # None: only on a terminal
-    in_flight: dict = {}
-    retry: deque = deque()  # single samples to rerun alone after a worker died
-    t0 = time.perf_counter()
     try:
-        while ranges or retry or in_flight:
-            if retry and not in_flight:
-                submit(*retry.popleft(), isolated=True)
-            while ranges and not retry and len(in_flight) < 2 * executor.workers:
-                submit(*ranges.popleft())
-            for fut in executor.wait_first(list(in_flight)):
-                if fut not in in_flight:  # requeued after a worker died
-                    continue
-                draws, chunk = in_flight.pop(fut)
-                try:
-                    results = fut.result()
-                except Exception as exc:
-                    if not _worker_died(exc):
-                        raise
-                    if not chunk.isolated:
-                        retry.extend((i, i + 1) for i in range(chunk.start, chunk.stop))
-                        for other, (_, lost) in list(in_flight.items()):
-                            if not (other.done() and other.exception() is None):
-                                in_flight.pop(other)  # taken down with the pool: rerun alone
-                                retry.extend((i, i + 1) for i in range(lost.start, lost.stop))
-                        executor.restart()
-                        continue
-                    executor.restart()
-                    results = _failed_results(chunk, "worker process died while evaluating "
-                                              f"this sample ({exc!r})")
-                file.write_chunk(chunk.start, chunk.stop,
-                                 _columns(names, study.scene_dimension, draws, results))
-                report.evaluated += (chunk.stop - chunk.start) * n_scenes
-                for res in results:
-                    report.solver_time += float(res.wall_time.sum())
-                    for s in res.status:
-                        report.status_counts[s] = report.status_counts.get(s, 0) + 1
-                bar.update((chunk.stop - chunk.start) * n_scenes)
+        _run_chunks(executor, schedule, make_chunk, consume)
     finally:
         report.wall_time = time.perf_counter() - t0
         bar.close()
