@@ -230,7 +230,7 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
 
         base = get_preset(base)
     rows = _rows(scenes)
-    if workers == 1 and scheduler in (None, "local"):
+    if scheduler in (None, "local") and (workers or _default_workers()) == 1:
         return _evaluate_rows(rows, kwargs, base)
     return _evaluate_rows_parallel(rows, kwargs, base, workers, chunk_size, scheduler)
 
