@@ -156,6 +156,16 @@ def test_fast_tier_is_offered_and_close_to_the_full_model():
     assert fast.critical_height == pytest.approx(full.critical_height, rel=0.06)
 
 
+def test_fast_tier_carries_the_full_tiers_validity_flags():
+    # phi = 1 deg: sliding stops at 0.21 t_c ("stops_early") and the height found indents the
+    # billet past 0.1 D ("crushed"); the fast tier must say so as the full tier does.
+    scene = make_scene(preset="paper-quartz", angle=1.0)
+    fast = critical_height(scene, tier="fast", h_min=0.01, h_max=1000.0)
+    full = critical_height(scene, rtol=1e-2, h_min=0.01, h_max=1000.0)
+    assert {"stops_sliding", "stops_early"} <= set(fast.flags)
+    assert set(fast.flags) == set(full.flags)
+
+
 @pytest.mark.parametrize("kwargs, key", [
     ({"tier": "fastest"}, "tier"),
     ({"rtol": -1.0}, "rtol"),

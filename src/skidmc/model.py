@@ -233,7 +233,8 @@ class SkidModel:
 
 
 def build_model(scene, resolution=None, *, level=0.0, melting=True,
-                runaway_fraction=DEFAULT_RUNAWAY_FRACTION, horizon=HORIZON_EXIT_TIMES):
+                runaway_fraction=DEFAULT_RUNAWAY_FRACTION, horizon=HORIZON_EXIT_TIMES,
+                meshes=True):
     """Infer the model a scene needs and build its meshes.
 
     Parameters
@@ -251,6 +252,9 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         Runaway rule, see :mod:`skidmc.thermal` (0 disables it).
     horizon : float
         Integration horizon in exit times.
+    meshes : bool
+        Build the meshes. Without them (empty arrays) the model still carries the mechanics,
+        terms and validity flags, e.g. for the fast tier's results.
 
     Returns
     -------
@@ -322,9 +326,14 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     zone = estimated_reaction_zone(t_exit, alpha_he, scene.initial_temperature, prefactor, t_a)
     h0_he = resolution.first_cell_fraction * zone
     h0_tg = h0_he * math.sqrt(alpha_tg / alpha_he)
-    n_cells = resolution.cells_per_medium
-    w_he = geometric_widths(h0_he, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_he * t_end), n_cells)
-    w_tg = geometric_widths(h0_tg, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_tg * t_end), n_cells)
+    n_cells = resolution.cells_per_medium if meshes else 0
+    if meshes:
+        w_he = geometric_widths(h0_he, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_he * t_end),
+                                n_cells)
+        w_tg = geometric_widths(h0_tg, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_tg * t_end),
+                                n_cells)
+    else:
+        w_he = w_tg = np.empty(0)
 
     width = np.concatenate([w_tg[::-1], w_he])
     rho_c = np.concatenate([np.full(n_cells, tg_rho_c), np.full(n_cells, he_rho_c)])
@@ -334,9 +343,11 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     # interface face is Eq. 16's elimination of T_b).
     half_res = width / (2.0 * k)
     face = 1.0 / (half_res[:-1] + half_res[1:])
-    g_tg = 1.0 / half_res[n_cells - 1]
-    g_he = 1.0 / half_res[n_cells]
-    q_share_he = g_he / (g_tg + g_he)
+    q_share_he = math.nan
+    if meshes:
+        g_tg = 1.0 / half_res[n_cells - 1]
+        g_he = 1.0 / half_res[n_cells]
+        q_share_he = g_he / (g_tg + g_he)
 
     return SkidModel(
         omega=omega, contact_time=t_c, exit_time=t_exit, exit_kind=exit_kind,

@@ -300,7 +300,11 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     if tier == "fast":
         from skidmc.fast import fast_critical_height
 
-        return fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
+        res = fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
+        # The same validity flags as the full tier (scene and height), without its meshes.
+        model = build_model(scene, melting=melting, meshes=False)
+        res.flags = model.flags + model.height_flags(res.critical_height)
+        return res
     if not (isinstance(rtol, (int, float)) and 0.0 < rtol < 0.5):
         raise SceneError("rtol", rtol, "must be a number in (0, 0.5)")
     if method not in ("brent", "bisection"):
