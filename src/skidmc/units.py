@@ -110,12 +110,14 @@ def to_si(key: str, value: object, expected_unit: str) -> float:
         The units cannot be parsed, or have the wrong dimension for `key` (an angle unit counts
         as a dimension of its own, so ``"0.1 deg"`` is refused for a dimensionless key).
     """
-    expected = ureg.parse_units(expected_unit)
     wanted = "a single number" + (f" in [{expected_unit}]" if expected_unit != "1" else "")
     if isinstance(value, bool) or (hasattr(value, "dtype") and value.dtype.kind == "b"):
         raise SceneError(key, value, f"expected {wanted} or a unit string, got a boolean")
     if isinstance(value, numbers.Real):
+        # Before any pint call: a plain number needs no units (ensembles build scenes from
+        # floats, and parsing the unit cost ~1 ms per scene).
         return float(value)
+    expected = ureg.parse_units(expected_unit)
     if isinstance(value, pint.Quantity):
         # Re-create in our registry (a quantity from another registry cannot be converted here).
         quantity = ureg.Quantity(float(value.magnitude), str(value.units))
