@@ -346,9 +346,9 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
     from the root found at ``level - COARSE_GAP`` (levels >= COARSE_GAP) or from the fast
-    tier's height. From a guess, secant steps on the margin (:func:`_secant`) usually
-    converge in 2-4 simulations; otherwise bracketing and Brent's method take over, reusing
-    every simulation done.
+    tier's height. From a guess, steps that bracket the predicted root (:func:`_guided_root`)
+    usually converge in 3-4 simulations; otherwise bracketing and Brent's method take over,
+    reusing every simulation done.
     """
     own_model = model is None
     if own_model:
@@ -390,7 +390,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     if method == "bisection":
         x_root, censored = _bisection(margin, x_min, x_max, x_tol)
     elif h_guess is not None:
-        x_root, censored = _secant(margin, math.log(h_guess), slope, x_tol, x_min, x_max), None
+        x_root, censored = _guided_root(margin, math.log(h_guess), slope, x_tol, x_min, x_max), None
     if x_root is None:
         x_root, censored = _brent(margin, x_min, x_max, x_tol, model, h_guess,
                                   overshoot=overshoot or 0.05)
@@ -424,7 +424,7 @@ def _margin_slope(history):
     return None
 
 
-def _secant(margin, x0, slope, x_tol, x_min, x_max, max_simulations=8):
+def _guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=8):
     """Root of the margin on ln H from a close guess ``x0``, always from a tight bracket; or None.
 
     The margin is smooth but not linear near the root (its slope changes by ~30 % within
