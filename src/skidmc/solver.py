@@ -63,11 +63,6 @@ COARSE_GAP = 2.0
 #: 4**-L bounds every observed value from L = 1.5 up, with 20 % to spare at L = 2.
 RICHARDSON_ERROR_LEVEL0 = 4.2e-3
 
-#: Bound on |m''/m'| of the margin m(ln H) near the root [1], for the secant steps' error
-#: bound. Measured on the report presets: the margin's slope goes from -0.75 to -1.3 across
-#: +-10 % of H_c (quartz, level 1), |m''/m'| ~ 5.
-MARGIN_CURVATURE = 6.0
-
 #: Relative error of the fast tier's height used as a first guess [1] (its worst case on the
 #: studies' ranges is ~10 %, results/benchmarks/fast_tier.md).
 FAST_GUESS_ERROR = 0.1
