@@ -52,6 +52,14 @@ INFO_SIZE = 12
 # BDF2 error -(2/9) h^3 y''', predictor error +h^3 y''' -> 2/11.
 _BDF2_ERROR_CONSTANT = 2.0 / 11.0
 
+#: Newton's iterations stop when the largest temperature update falls below this fraction
+#: of the step's error tolerance. Newton converges quadratically here, so the error left
+#: is far below the update: 0.1 (was 0.01) moved the event time of the report presets by
+#: < 2e-5 relative at level 0 (1e-4 for gold next to its fold, against a level-0
+#: discretisation error of ~1e-2), < 5e-6 at level 1.5 and < 1e-7 at level 2.5, and saves
+#: 10-18 % of the Newton iterations (3.1 -> 2.6 per step at level 1.5).
+NEWTON_TOLERANCE_FRACTION = 0.1
+
 
 @njit(cache=True, inline="always")
 def _flux(t, q0, s, c, w, t_exit, q_ext):
@@ -74,14 +82,15 @@ def _he_enthalpy(temperature, rho_c, latent_v, melting_point, melt_width):
     """
     if latent_v <= 0.0:
         return rho_c * temperature, rho_c
-    z = (temperature - melting_point) / melt_width
+    inv_width = 1.0 / melt_width
+    z = (temperature - melting_point) * inv_width
     if z > 30.0:
         return rho_c * temperature + latent_v, rho_c
     if z < -30.0:
         return rho_c * temperature, rho_c
     th = np.tanh(z)
     return (rho_c * temperature + 0.5 * latent_v * (1.0 + th),
-            rho_c + 0.5 * latent_v * (1.0 - th * th) / melt_width)
+            rho_c + 0.5 * latent_v * (1.0 - th * th) * inv_width)
 
 
 @njit(cache=True)
@@ -119,14 +128,19 @@ def adiabatic_induction_time(temperature, prefactor, activation_temperature, adi
 
 @njit(cache=True)
 def _solve_tridiagonal(lower, diag, upper, rhs, cp, dp, out):
-    """Thomas algorithm; ``lower[i]`` couples i to i-1, ``upper[i]`` couples i to i+1."""
+    """Thomas algorithm; ``lower[i]`` couples i to i-1, ``upper[i]`` couples i to i+1.
+
+    One division per row (the pivot's inverse): the sweep is a chain of dependent
+    operations, so its latency, not its operation count, sets the cost.
+    """
     n = diag.shape[0]
-    cp[0] = upper[0] / diag[0]
-    dp[0] = rhs[0] / diag[0]
+    inv = 1.0 / diag[0]
+    cp[0] = upper[0] * inv
+    dp[0] = rhs[0] * inv
     for i in range(1, n):
-        m = diag[i] - lower[i] * cp[i - 1]
-        cp[i] = upper[i] / m
-        dp[i] = (rhs[i] - lower[i] * dp[i - 1]) / m
+        inv = 1.0 / (diag[i] - lower[i] * cp[i - 1])
+        cp[i] = upper[i] * inv
+        dp[i] = (rhs[i] - lower[i] * dp[i - 1]) * inv
     out[n - 1] = dp[n - 1]
     for i in range(n - 2, -1, -1):
         out[i] = dp[i] - cp[i] * out[i + 1]
@@ -269,7 +283,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     rejected = 0
     t_max_prev = initial_temperature
     y_max_prev = 0.0
-    newton_tol = 1e-2 * tol_temperature
+    newton_tol = NEWTON_TOLERANCE_FRACTION * tol_temperature
 
     while t < t_end and steps + rejected < max_steps:
         # Land exactly on t_exit (flux kink or jump) and on t_end, stretching the step
@@ -335,11 +349,11 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                     i = n_target + j
                     if temp_new[i] < t_cold:
                         continue
-                    k = prefactor * np.exp(-activation_temperature / temp_new[i])
-                    denom = 1.0 + bdt * k
-                    remaining = (1.0 - hist_y[j]) / denom
-                    source = q_v * k * remaining
-                    dsource = source * activation_temperature / (temp_new[i] * temp_new[i] * denom)
+                    inv_t = 1.0 / temp_new[i]
+                    k = prefactor * np.exp(-activation_temperature * inv_t)
+                    inv_denom = 1.0 / (1.0 + bdt * k)
+                    source = q_v * k * (1.0 - hist_y[j]) * inv_denom
+                    dsource = source * activation_temperature * inv_t * inv_t * inv_denom
                     resid[i] -= bdt * width[i] * source
                     diag[i] -= bdt * width[i] * dsource
             for i in range(n):
@@ -385,11 +399,13 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
             # Local error: BDF2 corrector minus the quadratic extrapolation through the
             # last three accepted temperatures (Newton divided differences).
             if n_hist >= 2:
+                inv_dt1 = 1.0 / dt_prev
+                inv_dt0 = 1.0 / dt_prev2
+                c2 = dt * (dt + dt_prev) / (dt_prev + dt_prev2)
                 for i in range(n):
-                    d1 = (temp[i] - temp_prev[i]) / dt_prev
-                    d0 = (temp_prev[i] - temp_prev2[i]) / dt_prev2
-                    dd = (d1 - d0) / (dt_prev + dt_prev2)
-                    pred = temp[i] + dt * d1 + dt * (dt + dt_prev) * dd
+                    d1 = (temp[i] - temp_prev[i]) * inv_dt1
+                    d0 = (temp_prev[i] - temp_prev2[i]) * inv_dt0
+                    pred = temp[i] + dt * d1 + c2 * (d1 - d0)
                     e = abs(temp_new[i] - pred) * _BDF2_ERROR_CONSTANT
                     if e > err:
                         err = e
