@@ -63,9 +63,24 @@ COARSE_GAP = 2.0
 #: 4**-L bounds every observed value from L = 1.5 up, with 20 % to spare at L = 2.
 RICHARDSON_ERROR_LEVEL0 = 4.2e-3
 
-#: Relative error of the fast tier's height used as a first guess [1] (its worst case on the
-#: studies' ranges is ~10 %, results/benchmarks/fast_tier.md).
-FAST_GUESS_ERROR = 0.1
+#: Relative error of the fast tier's height used as a first guess [1]: its p90 against the
+#: full model on the studies' ranges (4.6 %, worst ~10 %, results/benchmarks/fast_tier.md). A
+#: guess further off costs one or two more simulations, never a wrong root.
+FAST_GUESS_ERROR = 0.05
+
+#: d margin / d ln H on the go side [1] when nothing better is known: t_ev ~ H^-s with s
+#: measured 1.1-1.35 on the report presets (rebound exits), and its relative uncertainty.
+DEFAULT_GO_SLOPE = -1.25
+DEFAULT_GO_SLOPE_ERROR = 0.3
+#: Relative uncertainty of a go-side slope carried over from a coarser level's search.
+CARRIED_GO_SLOPE_ERROR = 0.1
+#: Go points farther than this from the root [1, in ln H] are not used for the secant slope.
+GO_SECANT_SPAN = 0.1
+#: Bend of the go-side margin [1]: a secant through go points at distances d_a < d_b (in
+#: ln H) from the root misses it by about GO_BEND * d_a * d_b (a quadratic's interpolation
+#: error, kappa d_a d_b / (2 |s|)). Measured 0.39 on paper2-quartz (secant through d = 0.034
+#: and 0.106 missed by 1.4e-3); 1.0 leaves a factor 2.5 to spare.
+GO_BEND = 1.0
 RICHARDSON_MIN_LEVEL = 1.5
 
 
@@ -320,10 +335,13 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     # (4 d_L + d_{L-1}) / 3, so each search gets 3/5 of the root-finder share.
     x_tol = 0.6 * (1.0 - DISCRETISATION_SHARE) * rtol
     coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
+    # The fine root lies above the coarse one by less than the coarse level's error (the
+    # errors are negative and shrink with the level): the go-side search starts that far up.
     fine = _search(scene, rtol, level, x_tol,
                    h_guess=coarse.critical_height if coarse.censored is None else None,
-                   overshoot=2.0 * modelled_error(level - 1.0),
-                   slope=_margin_slope(coarse.history), **common)
+                   overshoot=modelled_error(level - 1.0),
+                   slope=_margin_slope(coarse.history), go_slope=_go_slope(coarse.history),
+                   **common)
     fine.evaluations += coarse.evaluations
     fine.wall_time = time.perf_counter() - start
     if fine.censored is None and coarse.censored is None:
@@ -336,7 +354,7 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
 
 
 def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
-            model=None, h_guess=None, overshoot=None, slope=None):
+            model=None, h_guess=None, overshoot=None, slope=None, go_slope=None):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
@@ -366,6 +384,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         if coarse.censored is None:
             h_guess = coarse.critical_height
             slope = _margin_slope(coarse.history)
+            go_slope = _go_slope(coarse.history)
             # The fine root lies within the coarse level's error of the coarse root.
             overshoot = 2.0 * modelled_error(level - COARSE_GAP)
     elif method == "brent" and h_guess is None and own_model:
@@ -384,6 +403,10 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     x_root = None
     if method == "bisection":
         x_root, censored = _bisection(margin, x_min, x_max, x_tol)
+    elif h_guess is not None and model.exit_kind == "rebound":
+        x_root = _go_side_root(margin, math.log(h_guess), go_slope, x_tol, x_min, x_max,
+                               guess_error=overshoot or 0.05)
+        censored = None
     elif h_guess is not None:
         x_root, censored = _guided_root(margin, math.log(h_guess), slope, x_tol, x_min, x_max), None
     if x_root is None:
@@ -416,6 +439,97 @@ def _margin_slope(history):
     for (x0, m0), (x1, m1) in zip(pts, pts[1:]):
         if m0 > 0.0 >= m1 and x1 > x0:
             return (m1 - m0) / (x1 - x0)
+    return None
+
+
+def _go_slope(history):
+    """d margin / d ln H [1] between the two go points (m <= 0) closest to the root, or None."""
+    go = [(math.log(h), m) for h, m in history if math.isfinite(m) and m <= 0.0]
+    if len(go) < 2:
+        return None
+    (x0, m0), (x1, m1) = go[0], go[1]
+    slope = (m1 - m0) / (x1 - x0)
+    return slope if slope < 0.0 else None
+
+
+def _go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
+                  max_simulations=8):
+    """Root of the margin on ln H by extrapolation from its go side (m <= 0); or None.
+
+    For a rebound exit the margin is analytic on the go side up to the root: the event
+    comes before t_exit, under the true flux, and t_ev ~ H^-s with s nearly constant (its
+    secant slope changes by < 1 % over 5 % of H on the report presets). On the no-go side
+    the event falls after t_exit, under the extension flux, and the margin bends (its slope
+    changes by ~30 % within 0.5 % of H_c, with a kink at the root). So the root is taken from
+    a secant through go points only, once the closest go point lies within ``4 x_tol`` of
+    it (the extrapolation error is then that distance times the slope's relative change over
+    it, far below ``x_tol``) or the secant's modelled bend error (:data:`GO_BEND`) is below
+    ``x_tol / 2``. The secant uses the farthest go point within :data:`GO_SECANT_SPAN`, which
+    keeps the margin's ~1e-5 step-size noise out of the slope.
+
+    Each simulation aims just above the predicted root, by the prediction's own uncertainty
+    (at least ``1.5 x_tol``), so that it lands on the go side: from a coarse level's root and
+    slope this usually takes 2 simulations, from the fast tier's height 3. A no-go point
+    only bounds the root from below (and closes a bracket, accepted by linear interpolation
+    when it is ``4 x_tol`` wide). Returns None when the steps leave [x_min, x_max], meet a
+    non-finite margin, contradict monotonicity or do not converge: the caller then brackets
+    and runs Brent's method, reusing every simulation.
+    """
+    known = slope is not None and slope < 0.0
+    slope = slope if known else DEFAULT_GO_SLOPE
+    slope_error = CARRIED_GO_SLOPE_ERROR if known else DEFAULT_GO_SLOPE_ERROR
+    push = 1.5 * x_tol
+    go = []      # (x, m) with m <= 0, closest to the root first
+    lo = None    # (x, m) of the highest no-go point (m > 0)
+    x = x_guess + guess_error
+    for _ in range(max_simulations):
+        if not (x_min < x < x_max):
+            return None
+        m = margin(x)
+        if not math.isfinite(m):
+            return None
+        if m > 0.0:
+            if lo is None or x > lo[0]:
+                lo = (x, m)
+        else:
+            go.append((x, m))
+            go.sort()
+        if go and lo is not None and lo[0] >= go[0][0]:
+            return None  # not monotone at this scale: leave it to Brent
+        if go:
+            xa, ma = go[0]
+            far = [p for p in go[1:] if p[0] - xa <= GO_SECANT_SPAN]
+            if far:
+                xb, mb = far[-1]
+                secant = (mb - ma) / (xb - xa)
+                if not secant < 0.0:
+                    return None
+                root = xa - ma / secant
+                bend = GO_BEND * (xa - root) * (xb - root)
+                if (xa - root <= 4.0 * x_tol or bend <= 0.5 * x_tol) and (
+                        lo is None or root >= lo[0]):
+                    return root
+                uncertainty = max(push, bend)
+            else:
+                root = xa - ma / slope
+                uncertainty = max(push, slope_error * (xa - root))
+            if lo is not None:
+                if xa - lo[0] <= 4.0 * x_tol:
+                    return lo[0] + lo[1] * (xa - lo[0]) / (lo[1] - ma)
+                if root <= lo[0]:
+                    # The go-side prediction is contradicted by a no-go point: interpolate
+                    # in the bracket instead.
+                    root = lo[0] + lo[1] * (xa - lo[0]) / (lo[1] - ma)
+                    uncertainty = push
+            x = root + uncertainty
+            if x >= xa - 0.5 * push:
+                # The prediction gives no progress: halve the way to the bracket's low end
+                # (or to the root predicted from below).
+                x = 0.5 * (xa + (lo[0] if lo is not None else root - uncertainty))
+        else:
+            # Only no-go points: t_ev ~ H^-s predicts the root above; aim past it.
+            root = lo[0] - lo[1] / slope
+            x = root + max(push, slope_error * (root - lo[0]))
     return None
 
 
