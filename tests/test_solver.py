@@ -7,8 +7,10 @@ import pytest
 from skidmc.errors import SceneError
 from skidmc.presets import PAPER_TABLE_VIII, get_preset
 from skidmc.scene import make_scene
-from skidmc.solver import (ERROR_LEVEL0, critical_height, extrapolated_error, level_for_rtol,
-                           modelled_error, plan_for_rtol)
+from skidmc.model import MELT_WIDTH_BIAS_PER_K
+from skidmc.solver import (DISCRETISATION_SHARE, ERROR_LEVEL0, MAX_MELT_WIDTH, MELT_SHARE,
+                           ROOT_SHARE, critical_height, extrapolated_error, level_for_rtol,
+                           melt_width_floor, melt_width_for_rtol, modelled_error, plan_for_rtol)
 
 FT = 0.3048
 
@@ -115,15 +117,26 @@ def test_pendulum_has_no_normal_force_moment():
 def test_level_for_rtol_meets_error_model():
     for rtol in (1e-1, 1e-2, 1e-3, 1e-4):
         level = level_for_rtol(rtol)
-        assert ERROR_LEVEL0 * 4.0 ** -level <= 0.8 * rtol
-        assert level == 0 or ERROR_LEVEL0 * 4.0 ** -(level - 0.5) > 0.8 * rtol
+        assert ERROR_LEVEL0 * 4.0 ** -level <= DISCRETISATION_SHARE * rtol
+        assert level == 0 or ERROR_LEVEL0 * 4.0 ** -(level - 0.5) > DISCRETISATION_SHARE * rtol
+
+
+def test_rtol_shares_add_up_and_melt_width_bias_fits_its_share():
+    assert DISCRETISATION_SHARE + MELT_SHARE + ROOT_SHARE == pytest.approx(1.0)
+    for rtol in (3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4):
+        level, _ = plan_for_rtol(rtol)
+        width = melt_width_for_rtol(rtol, level)
+        assert melt_width_floor(level) <= width <= MAX_MELT_WIDTH
+        # Above the floor the bias must fit its share; at the floor it is in the level's error.
+        if width > melt_width_floor(level):
+            assert MELT_WIDTH_BIAS_PER_K * width <= MELT_SHARE * rtol * (1 + 1e-12)
 
 
 def test_plan_for_rtol_meets_its_error_model_and_is_never_finer_than_plain():
     for rtol in (1e-1, 1e-2, 3e-3, 1e-3, 1e-4):
         level, extrapolate = plan_for_rtol(rtol)
         model = extrapolated_error(level) if extrapolate else modelled_error(level)
-        assert model <= 0.8 * rtol
+        assert model <= DISCRETISATION_SHARE * rtol
         assert level <= level_for_rtol(rtol)
     assert plan_for_rtol(1e-3) == (1.5, True)    # the default: levels 0.5 and 1.5
     assert plan_for_rtol(1e-2) == (0.5, False)

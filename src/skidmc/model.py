@@ -102,21 +102,39 @@ class Resolution:
     melt_width: float
 
 
+#: Melting-step width [K] used when none is asked for. The width w is not a refinement
+#: parameter of the levels: the bias it puts on the critical height is first order in w
+#: (below), and the number of time steps grows steeply as w shrinks (each HE cell's melting
+#: kink must be resolved: 3,356 steps at level 3 with w = 0.25 K, 729 with w = 2 K). The
+#: solver therefore picks w from its tolerance (skidmc.solver.melt_width_for_rtol) and keeps
+#: it the same at every level, so that the levels' errors (and Richardson extrapolation) see
+#: only the mesh and the time steps.
+DEFAULT_MELT_WIDTH = 1.0
+
+#: Bound on the critical height's relative bias per kelvin of melting width [1/K]: measured
+#: at level 2.5 against w = 0.125 K (``python scripts/melt_width_bias.py``,
+#: results/validation/melt_width_bias.md): 1.2e-4/K on paper-quartz and paper2-quartz,
+#: 0.6e-4/K on alumina, flat to first order between 0.125 and 2 K, smaller per K at 4 K.
+MELT_WIDTH_BIAS_PER_K = 1.5e-4
+
 #: Base resolution (level 0). Each level doubles the cells, halves the first cell and
 #: divides the step tolerance by 8 (BDF2: step ~ tol^(1/3), so the time step halves),
 #: so that both spatial and temporal errors fall ~4x per level (second order).
 BASE_RESOLUTION = Resolution(cells_per_medium=24, first_cell_fraction=0.5, tol_temperature=0.5,
-                             melt_width=2.0)
+                             melt_width=DEFAULT_MELT_WIDTH)
 
 
-def resolution_for_level(level):
-    """Resolution of refinement level ``level`` (float allowed) [see :data:`BASE_RESOLUTION`]."""
+def resolution_for_level(level, melt_width=DEFAULT_MELT_WIDTH):
+    """Resolution of refinement level ``level`` (float allowed) [see :data:`BASE_RESOLUTION`].
+
+    ``melt_width`` [K] is carried unchanged (see :data:`DEFAULT_MELT_WIDTH`).
+    """
     scale = 2.0 ** level
     return Resolution(
         cells_per_medium=max(8, int(round(BASE_RESOLUTION.cells_per_medium * scale))),
         first_cell_fraction=BASE_RESOLUTION.first_cell_fraction / scale,
         tol_temperature=BASE_RESOLUTION.tol_temperature / scale**3,
-        melt_width=BASE_RESOLUTION.melt_width / scale,
+        melt_width=float(melt_width),
     )
 
 
@@ -234,7 +252,7 @@ class SkidModel:
 
 def build_model(scene, resolution=None, *, level=0.0, melting=True,
                 runaway_fraction=DEFAULT_RUNAWAY_FRACTION, horizon=HORIZON_EXIT_TIMES,
-                meshes=True):
+                meshes=True, melt_width=DEFAULT_MELT_WIDTH):
     """Infer the model a scene needs and build its meshes.
 
     Parameters
@@ -245,6 +263,8 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         Numerical resolution; default ``resolution_for_level(level)``.
     level : float
         Refinement level used when ``resolution`` is not given.
+    melt_width : float
+        Width of the smoothed melting step [K], used when ``resolution`` is not given.
     melting : bool
         Model melting of the HE (enthalpy plateau at T_m) when the scene has a
         heat of fusion.
@@ -261,7 +281,7 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     SkidModel
     """
     if resolution is None:
-        resolution = resolution_for_level(level)
+        resolution = resolution_for_level(level, melt_width)
     sigma = scene.flow_stress
     mass = scene.billet_mass
     diameter = scene.billet_diameter

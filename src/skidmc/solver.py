@@ -25,7 +25,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from skidmc.errors import SceneError
-from skidmc.model import build_model
+from skidmc.model import MELT_WIDTH_BIAS_PER_K, build_model
 from skidmc.thermal import (INFO_EVENT, INFO_FAILED, INFO_REJECTED, INFO_STEPS,
                             INFO_T_EVENT, INFO_T_EXIT_MAX, INFO_T_MAX, INFO_Y_EXIT_MAX,
                             simulate_kernel)
@@ -45,10 +45,16 @@ DEFAULT_H_MAX = 1e4
 #: height at level L, over all report presets and the second series' extreme mu, as
 #: second order with a worst case of 1.0e-2 * 4**-L (observed 1.0e-2, 2.9e-3, 6.3e-4,
 #: 1.7e-4 at L = 0, 1, 2, 3). ERROR_LEVEL0 bounds every observed level from above. The
-#: solver picks the lowest (half-)level whose modelled error is below
-#: DISCRETISATION_SHARE * rtol; the rest of rtol goes to the root finder (on ln H).
+#: tolerance rtol is shared three ways: DISCRETISATION_SHARE to the mesh and time steps
+#: (the solver picks the lowest (half-)level whose modelled error is below it), MELT_SHARE
+#: to the smoothing of the melting step (its width, :func:`melt_width_for_rtol`) and
+#: ROOT_SHARE to the root finder (on ln H).
 ERROR_LEVEL0 = 1.2e-2
-DISCRETISATION_SHARE = 0.8
+DISCRETISATION_SHARE = 0.6
+MELT_SHARE = 0.2
+ROOT_SHARE = 0.2
+#: Widest melting step used [K]: the bias per kelvin was measured up to 4 K.
+MAX_MELT_WIDTH = 4.0
 MAX_STEPS = 200_000
 
 #: Coarse-to-fine search: at level L >= COARSE_GAP, the critical height is first found at level
@@ -63,10 +69,11 @@ COARSE_GAP = 2.0
 #: 4**-L bounds every observed value from L = 1.5 up, with 20 % to spare at L = 2.
 RICHARDSON_ERROR_LEVEL0 = 4.2e-3
 
-#: Relative error of the fast tier's height used as a first guess [1]: its p90 against the
-#: full model on the studies' ranges (4.6 %, worst ~10 %, results/benchmarks/fast_tier.md). A
-#: guess further off costs one or two more simulations, never a wrong root.
-FAST_GUESS_ERROR = 0.05
+#: Relative error of the fast tier's height used as a first guess [1]: about its median
+#: against the full model on the studies' ranges (1.3 %; p90 4.6 %, worst ~10 %,
+#: results/benchmarks/fast_tier.md). The go-side search starts this far above the guess;
+#: a guess further off costs one or two more simulations, never a wrong root.
+FAST_GUESS_ERROR = 0.02
 
 #: d margin / d ln H on the go side [1] when nothing better is known: t_ev ~ H^-s with s
 #: measured 1.1-1.35 on the report presets (rebound exits), and its relative uncertainty.
@@ -82,6 +89,31 @@ GO_SECANT_SPAN = 0.1
 #: and 0.106 missed by 1.4e-3); 1.0 leaves a factor 2.5 to spare.
 GO_BEND = 1.0
 RICHARDSON_MIN_LEVEL = 1.5
+
+
+#: Narrowest melting step at level L [K]: MELT_WIDTH_LEVEL0 * 2**-L, the width with which
+#: the levels' error model (ERROR_LEVEL0, RICHARDSON_ERROR_LEVEL0) was first calibrated
+#: (results/validation/refinement.md, where the width shrank with the level). A much narrower
+#: step is not resolved by the level's cells and steps (level 1 with w = 0.013 K is off by
+#: 8e-3): the width never goes below this floor, and at the floor its bias is part of the
+#: level's modelled error.
+MELT_WIDTH_LEVEL0 = 2.0
+
+
+def melt_width_floor(level):
+    """Narrowest melting-step width used at refinement level ``level`` [K]."""
+    return MELT_WIDTH_LEVEL0 * 2.0 ** (-level)
+
+
+def melt_width_for_rtol(rtol, level=0.0):
+    """Width of the smoothed melting step [K] for tolerance ``rtol`` at ``level``.
+
+    The widest width whose bias, first order in the width and at most
+    :data:`skidmc.model.MELT_WIDTH_BIAS_PER_K` per kelvin, stays below MELT_SHARE * rtol;
+    at most :data:`MAX_MELT_WIDTH` and at least :func:`melt_width_floor` of ``level``.
+    """
+    return max(melt_width_floor(level),
+               min(MAX_MELT_WIDTH, MELT_SHARE * rtol / MELT_WIDTH_BIAS_PER_K))
 
 
 def modelled_error(level):
@@ -232,7 +264,7 @@ def _half_level_above(needed):
 
 
 def level_for_rtol(rtol):
-    """Lowest half-integer refinement level whose modelled error is below 0.8 rtol [1]."""
+    """Lowest half-integer refinement level whose modelled error is below 0.6 rtol [1]."""
     if not rtol > 0.0:
         raise SceneError("rtol", rtol, "must be > 0")
     return _half_level_above(
@@ -249,7 +281,7 @@ def plan_for_rtol(rtol):
 
     Either one search at :func:`level_for_rtol`, or (when that is cheaper) a search at
     ``level - 1`` and one at ``level`` combined by Richardson extrapolation, whose modelled
-    error :func:`extrapolated_error` is below 0.8 rtol. Extrapolation is offered only from
+    error :func:`extrapolated_error` is below 0.6 rtol. Extrapolation is offered only from
     :data:`RICHARDSON_MIN_LEVEL` up, where the refinement study shows second order.
     """
     plain = level_for_rtol(rtol)
@@ -263,15 +295,16 @@ def plan_for_rtol(rtol):
 
 def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
                     *, method="brent", level=None, extrapolate=None, melting=True,
-                    runaway_fraction=None, h_guess=None, model=None):
+                    runaway_fraction=None, h_guess=None, model=None, melt_width=None):
     """Critical drop height of a scene [m].
 
     Parameters
     ----------
     scene : skidmc.scene.Scene
     rtol : float
-        Relative tolerance on the critical height [1]: 80 % goes to the mesh and
-        steps (see :func:`plan_for_rtol`), 20 % to the root finder.
+        Relative tolerance on the critical height [1]: 60 % goes to the mesh and
+        steps (see :func:`plan_for_rtol`), 20 % to the smoothing of the melting step
+        (:func:`melt_width_for_rtol`), 20 % to the root finder.
     tier : {"full", "fast"}
         Model fidelity: "full" is the report's model converged to ``rtol``; "fast" is the
         reduced model of :func:`skidmc.fast.fast_critical_height` (``rtol`` and the numerical
@@ -295,8 +328,10 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     h_guess : float, optional
         First height tried [m].
     model : SkidModel, optional
-        A prebuilt model (overrides scene, level, melting, runaway_fraction; no
+        A prebuilt model (overrides scene, level, melting, runaway_fraction, melt_width; no
         extrapolation or coarse start).
+    melt_width : float, optional
+        Width of the smoothed melting step [K]; default :func:`melt_width_for_rtol`.
 
     Returns
     -------
@@ -319,21 +354,27 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         raise SceneError("rtol", rtol, "must be a number in (0, 0.5)")
     if method not in ("brent", "bisection"):
         raise SceneError("method", method, "expected 'brent' or 'bisection'")
+    if melt_width is not None and not (isinstance(melt_width, (int, float))
+                                       and melt_width > 0.0):
+        raise SceneError("melt_width", melt_width, "must be a number > 0 [K]")
     if level is None:
         level, planned = plan_for_rtol(rtol)
         extrapolate = planned if extrapolate is None else extrapolate
     extrapolate = bool(extrapolate) and model is None and level >= 1.0
+    if melt_width is None:
+        # The same width at every level of the search (coarse start, Richardson pair).
+        melt_width = melt_width_for_rtol(rtol, level)
     common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
-                  runaway_fraction=runaway_fraction)
+                  runaway_fraction=runaway_fraction, melt_width=float(melt_width))
     if not extrapolate:
-        res = _search(scene, rtol, level, (1.0 - DISCRETISATION_SHARE) * rtol, model=model,
+        res = _search(scene, rtol, level, ROOT_SHARE * rtol, model=model,
                       h_guess=h_guess, **common)
         res.wall_time = time.perf_counter() - start
         return res
 
     # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
     # (4 d_L + d_{L-1}) / 3, so each search gets 3/5 of the root-finder share.
-    x_tol = 0.6 * (1.0 - DISCRETISATION_SHARE) * rtol
+    x_tol = 0.6 * ROOT_SHARE * rtol
     coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
     # The fine root lies above the coarse one by less than the coarse level's error (the
     # errors are negative and shrink with the level): the go-side search starts that far up.
@@ -349,12 +390,24 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         fine.critical_height += correction
         fine.richardson_correction = correction / fine.critical_height
         fine.extrapolated = True
-        fine.error_estimate = extrapolated_error(level) + (1.0 - DISCRETISATION_SHARE) * rtol
+        fine.error_estimate = (extrapolated_error(level) + ROOT_SHARE * rtol
+                               + _melt_bias(fine.terms, melt_width, level))
     return fine
 
 
+def _melt_bias(terms, melt_width, level):
+    """Bound on the relative bias of the smoothed melting step [1].
+
+    0 without melting, and at the level's floor width, where the bias is part of the
+    level's modelled error (:data:`MELT_WIDTH_LEVEL0`).
+    """
+    if "melting" not in terms or melt_width <= melt_width_floor(level) * (1.0 + 1e-9):
+        return 0.0
+    return MELT_WIDTH_BIAS_PER_K * melt_width
+
+
 def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
-            model=None, h_guess=None, overshoot=None, slope=None, go_slope=None):
+            melt_width, model=None, h_guess=None, overshoot=None, slope=None, go_slope=None):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
@@ -366,10 +419,13 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     own_model = model is None
     if own_model:
         kwargs = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
-        model = build_model(scene, level=level, melting=melting, **kwargs)
+        model = build_model(scene, level=level, melting=melting, melt_width=melt_width,
+                            **kwargs)
     base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
                 exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
-                error_estimate=modelled_error(level) + (1.0 - DISCRETISATION_SHARE) * rtol)
+                error_estimate=(modelled_error(level) + ROOT_SHARE * rtol
+                                + _melt_bias(model.terms, model.resolution.melt_width,
+                                             level)))
 
     if "no_friction" in model.flags:
         return HeightResult(critical_height=h_max, censored="above", evaluations=0, **base)
@@ -379,7 +435,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         coarse = _search(scene, rtol, level - COARSE_GAP,
                          max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)), h_min=h_min,
                          h_max=h_max, method=method, melting=melting,
-                         runaway_fraction=runaway_fraction)
+                         runaway_fraction=runaway_fraction, melt_width=melt_width)
         coarse_evaluations = coarse.evaluations
         if coarse.censored is None:
             h_guess = coarse.critical_height
