@@ -11,10 +11,16 @@ worst case. The same runs give the residual error of the solver's Richardson val
 (levels L - 1 and L, ``skidmc.solver.RICHARDSON_ERROR_LEVEL0``).
 
 Writes results/validation/refinement.{csv,md,png}. Run: ``python scripts/refinement_study.py``.
+
+The melting step's width w is, by default, the solver's floor at each level
+(``skidmc.solver.melt_width_floor``: 2 K * 2**-L, the rule the error model was calibrated
+with). ``--melt-width W`` holds it at W kelvin at every level instead, as the solver does
+when rtol sets a wider step (``melt_width_for_rtol``); the files then get a ``_wW`` suffix.
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
 import math
 from pathlib import Path
@@ -29,7 +35,7 @@ from skidmc.model import resolution_for_level  # noqa: E402
 from skidmc.scene import make_scene  # noqa: E402
 from skidmc.solver import (ERROR_LEVEL0, RICHARDSON_ERROR_LEVEL0,  # noqa: E402
                            RICHARDSON_MIN_LEVEL, critical_height, level_for_rtol,
-                           plan_for_rtol)
+                           melt_width_floor, plan_for_rtol)
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
 LEVELS = [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0]
@@ -44,14 +50,24 @@ CASES = {
 
 
 def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--melt-width", type=float, default=None,
+                        help="melting-step width [K] at every level (default: the level floor)")
+    parser.add_argument("--max-level", type=float, default=LEVELS[-1])
+    args = parser.parse_args()
+    levels = [lv for lv in LEVELS if lv <= args.max_level]
+    suffix = "" if args.melt_width is None else f"_w{args.melt_width:g}"
+    width_text = ("the solver's floor 2 K * 2^-L" if args.melt_width is None
+                  else f"{args.melt_width:g} K at every level")
     OUT.mkdir(parents=True, exist_ok=True)
     table = {}
     for case, spec in CASES.items():
         spec = dict(spec)
         scene = make_scene(preset=spec.pop("preset", case), **spec)
         heights, costs = [], []
-        for level in LEVELS:
-            res = critical_height(scene, level=level, rtol=1e-7)
+        for level in levels:
+            width = melt_width_floor(level) if args.melt_width is None else args.melt_width
+            res = critical_height(scene, level=level, rtol=1e-7, melt_width=width)
             heights.append(res.critical_height)
             costs.append(res.wall_time / max(res.evaluations, 1))
             print(f"{case:28s} level {level:3.1f} H = {res.critical_height:.8g} m "
@@ -61,12 +77,12 @@ def main():
         converged = h[-1] + (h[-1] - h[-3]) / 3.0
         table[case] = (h, converged, np.array(costs))
 
-    with open(OUT / "refinement.csv", "w", newline="") as fh:
+    with open(OUT / f"refinement{suffix}.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(["case", "level", "cells_per_medium", "tol_temperature_K",
                          "critical_height_m", "rel_error", "ms_per_simulation"])
         for case, (h, conv, costs) in table.items():
-            for level, hh, cc in zip(LEVELS, h, costs):
+            for level, hh, cc in zip(levels, h, costs):
                 res = resolution_for_level(level)
                 writer.writerow([case, level, res.cells_per_medium, res.tol_temperature,
                                  f"{hh:.10g}", f"{hh / conv - 1:.3e}", f"{1e3 * cc:.3f}"])
@@ -74,22 +90,23 @@ def main():
     lines = [
         "# Refinement study: error of the critical height vs resolution level",
         "",
-        "`python scripts/refinement_study.py`. Converged value: Richardson extrapolation of levels "
-        f"{LEVELS[-3]:g} and {LEVELS[-1]:g} (second order). Relative error of each level against it.",
+        f"`python scripts/refinement_study.py{' --melt-width ' + format(args.melt_width, 'g') if suffix else ''}`"
+        f" (melting-step width: {width_text}). Converged value: Richardson extrapolation of levels "
+        f"{levels[-3]:g} and {levels[-1]:g} (second order). Relative error of each level against it.",
         "",
         "| case | converged H [m] | converged H [ft] | "
-        + " | ".join(f"L{lv:g}" for lv in LEVELS) + " | observed order (L1->L3) |",
-        "|---|---|---|" + "---|" * len(LEVELS) + "---|",
+        + " | ".join(f"L{lv:g}" for lv in levels) + " | observed order (L1->L3) |",
+        "|---|---|---|" + "---|" * len(levels) + "---|",
     ]
-    worst = np.zeros(len(LEVELS))
+    worst = np.zeros(len(levels))
     for case, (h, conv, _) in table.items():
         err = np.abs(h / conv - 1)
         worst = np.maximum(worst, err)
-        i1, i3 = LEVELS.index(1.0), LEVELS.index(3.0)
+        i1, i3 = levels.index(1.0), levels.index(3.0)
         order = math.log(max(err[i1], 1e-16) / max(err[i3], 1e-16)) / math.log(4.0)
         lines.append(f"| {case} | {conv:.6g} | {conv / 0.3048:.5g} | "
                      + " | ".join(f"{e:.1e}" for e in err) + f" | {order:.2f} |")
-    model_err = [ERROR_LEVEL0 * 4.0 ** (-lv) for lv in LEVELS]
+    model_err = [ERROR_LEVEL0 * 4.0 ** (-lv) for lv in levels]
     lines += [
         "| worst case | | | " + " | ".join(f"{e:.1e}" for e in worst) + " | |",
         "| solver's error model ERROR_LEVEL0 * 4^-L | | | "
@@ -99,16 +116,16 @@ def main():
         "",
         "R = H_L + (H_L - H_{L-1}) / 3; relative error of R against the converged value.",
         "",
-        "| case | " + " | ".join(f"L{lv:g}" for lv in LEVELS if lv >= 1.0) + " |",
-        "|---|" + "---|" * sum(lv >= 1.0 for lv in LEVELS),
+        "| case | " + " | ".join(f"L{lv:g}" for lv in levels if lv >= 1.0) + " |",
+        "|---|" + "---|" * sum(lv >= 1.0 for lv in levels),
     ]
     r_worst = {}
     for case, (h, conv, _) in table.items():
         cells = []
-        for i, lv in enumerate(LEVELS):
+        for i, lv in enumerate(levels):
             if lv < 1.0:
                 continue
-            j = LEVELS.index(lv - 1.0)
+            j = levels.index(lv - 1.0)
             r_err = abs((h[i] + (h[i] - h[j]) / 3.0) / conv - 1)
             r_worst[lv] = max(r_worst.get(lv, 0.0), r_err)
             cells.append(f"{r_err:.1e}")
@@ -130,15 +147,15 @@ def main():
         + f" (plain levels alone: "
         + ", ".join(f"{level_for_rtol(r):g}" for r in (1e-2, 3e-3, 1e-3, 1e-4)) + ").",
     ]
-    (OUT / "refinement.md").write_text("\n".join(lines) + "\n")
+    (OUT / f"refinement{suffix}.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     for case, (h, conv, _) in table.items():
-        cells = [resolution_for_level(lv).cells_per_medium for lv in LEVELS]
+        cells = [resolution_for_level(lv).cells_per_medium for lv in levels]
         err = np.abs(h / conv - 1)
         ax.loglog(cells[:-1], err[:-1], "o-", label=case)
-    cells = np.array([resolution_for_level(lv).cells_per_medium for lv in LEVELS])
+    cells = np.array([resolution_for_level(lv).cells_per_medium for lv in levels])
     ax.loglog(cells, model_err, "k--", label="error model (2nd order)")
     ax.set_xlabel("cells per medium (time step halves with each doubling)")
     ax.set_ylabel("relative error of the critical height [1]")
@@ -146,7 +163,7 @@ def main():
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(OUT / "refinement.png", dpi=150)
+    fig.savefig(OUT / f"refinement{suffix}.png", dpi=150)
 
 
 if __name__ == "__main__":

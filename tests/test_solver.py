@@ -197,3 +197,67 @@ def test_result_json_fields():
         assert key in d
     assert d["critical_height_ft"] == pytest.approx(d["critical_height_m"] / FT)
     assert math.isfinite(d["error_estimate"])
+
+
+def _kinked_margin(root, go_slope=-1.3, bend=0.2, nogo_slope=-0.9):
+    """A margin shaped like the measured one: smooth, slightly bent go side (m <= 0 above the
+    root), a different slope and a kink on the no-go side; counts its evaluations."""
+    calls = []
+
+    def margin(x):
+        calls.append(x)
+        d = x - root
+        return go_slope * d + bend * d * d if d >= 0.0 else nogo_slope * d - 2.0 * d * d
+
+    return margin, calls
+
+
+@pytest.mark.parametrize("guess_offset", [-0.08, -0.02, 0.0, 0.01, 0.05])
+@pytest.mark.parametrize("slope", [None, -1.25])
+def test_go_side_root_lands_within_tolerance_from_either_side(guess_offset, slope):
+    from skidmc.solver import _go_side_root
+
+    root, x_tol = 0.3, 1.2e-4
+    margin, calls = _kinked_margin(root)
+    x = _go_side_root(margin, root + guess_offset, slope, x_tol, -10.0, 10.0,
+                      guess_error=0.02)
+    assert x is not None
+    assert abs(x - root) < x_tol
+    assert len(calls) <= 6
+
+
+def test_go_side_root_from_a_close_guess_takes_two_simulations():
+    from skidmc.solver import _go_side_root
+
+    # A coarse level's root 0.4 % low with its go-side slope: what a Richardson pair's fine
+    # search sees. The first point lands 0.2 % above the root, the second within 4 x_tol.
+    root, x_tol = -1.0, 1.2e-4
+    margin, calls = _kinked_margin(root)
+    x = _go_side_root(margin, root - 0.004, -1.32, x_tol, -10.0, 10.0, guess_error=0.006)
+    assert abs(x - root) < x_tol
+    assert len(calls) == 2
+
+
+def test_go_side_root_gives_up_on_a_margin_that_is_not_monotone():
+    from skidmc.solver import _go_side_root
+
+    # Positive everywhere but the search's own first point: no root near the guess.
+    assert _go_side_root(lambda x: 1.0 + 0.0 * x, 0.0, None, 1e-4, -10.0, 10.0,
+                         guess_error=0.02) is None
+
+
+@pytest.mark.parametrize("name", ["paper-quartz", "paper-alumina-rough"])
+def test_go_side_search_agrees_with_bisection_on_the_same_mesh(name):
+    # Same model (level 0.5), two root finders: they must agree within their tolerances
+    # (x_tol = 0.2 rtol on ln H each; bisection ends inside a bracket of x_tol). From the fast
+    # tier's guess (0.1-0.3 % off on these presets) the go-side search needs 2-3 simulations.
+    from skidmc.model import build_model
+
+    scene = get_preset(name)
+    model = build_model(scene, level=0.5)
+    rtol = 1e-3
+    guess = critical_height(scene, tier="fast").critical_height
+    go = critical_height(scene, rtol=rtol, model=model, h_guess=guess)
+    bisect = critical_height(scene, rtol=rtol, model=model, method="bisection")
+    assert abs(math.log(go.critical_height / bisect.critical_height)) < 0.4 * rtol
+    assert go.evaluations <= 4 < bisect.evaluations

@@ -461,7 +461,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         x_root, censored = _bisection(margin, x_min, x_max, x_tol)
     elif h_guess is not None and model.exit_kind == "rebound":
         x_root = _go_side_root(margin, math.log(h_guess), go_slope, x_tol, x_min, x_max,
-                               guess_error=overshoot or 0.05)
+                               guess_error=overshoot or FAST_GUESS_ERROR)
         censored = None
     elif h_guess is not None:
         x_root, censored = _guided_root(margin, math.log(h_guess), slope, x_tol, x_min, x_max), None
