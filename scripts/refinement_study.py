@@ -137,10 +137,10 @@ def main():
                      if lv >= RICHARDSON_MIN_LEVEL else "(not used)" for lv in sorted(r_worst))
         + " |",
         "",
-        "(The values at L >= 3.5 use the L4 data that define the converged value, so they are "
-        "not independent.)",
+        f"(The values at L >= {levels[-2]:g} use the L{levels[-1]:g} data that define the "
+        "converged value, so they are not independent.)",
         "",
-        "The solver chooses the cheapest plan whose error model is below 0.8 rtol: "
+        "The solver chooses the cheapest plan whose error model is below 0.6 rtol (DISCRETISATION_SHARE): "
         + ", ".join(f"rtol {r:g} -> level {plan_for_rtol(r)[0]:g}"
                     + (" extrapolated" if plan_for_rtol(r)[1] else "")
                     for r in (1e-2, 3e-3, 1e-3, 1e-4))
