@@ -498,6 +498,15 @@ def _margin_slope(history):
     return None
 
 
+def _margin_inside(margin, x, x_min, x_max):
+    """The margin at ``x``, or None when x leaves (x_min, x_max) or the margin is not finite:
+    the guided searches then hand over to bracketing and Brent's method."""
+    if not (x_min < x < x_max):
+        return None
+    m = margin(x)
+    return m if math.isfinite(m) else None
+
+
 def _go_slope(history):
     """d margin / d ln H [1] between the two go points (m <= 0) closest to the root, or None."""
     go = [(math.log(h), m) for h, m in history if math.isfinite(m) and m <= 0.0]
@@ -539,10 +548,8 @@ def _go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
     lo = None    # (x, m) of the highest no-go point (m > 0)
     x = x_guess + guess_error
     for _ in range(max_simulations):
-        if not (x_min < x < x_max):
-            return None
-        m = margin(x)
-        if not math.isfinite(m):
+        m = _margin_inside(margin, x, x_min, x_max)
+        if m is None:
             return None
         if m > 0.0:
             if lo is None or x > lo[0]:
@@ -609,10 +616,8 @@ def _guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=8):
     previous = None
     x = x0
     for _ in range(max_simulations):
-        if not (x_min < x < x_max):
-            return None
-        m = margin(x)
-        if not math.isfinite(m):
+        m = _margin_inside(margin, x, x_min, x_max)
+        if m is None:
             return None
         if m > 0.0 and (lo is None or x > lo[0]):
             lo = (x, m)
