@@ -7,10 +7,10 @@ import pytest
 from skidmc.errors import SceneError
 from skidmc.presets import PAPER_TABLE_VIII, get_preset
 from skidmc.scene import make_scene
-from skidmc.model import MELT_WIDTH_BIAS_PER_K
+from skidmc.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
 from skidmc.solver import (DISCRETISATION_SHARE, ERROR_LEVEL0, MAX_MELT_WIDTH, MELT_SHARE,
                            ROOT_SHARE, critical_height, extrapolated_error, level_for_rtol,
-                           melt_width_floor, melt_width_for_rtol, modelled_error, plan_for_rtol)
+                           melt_width_for_rtol, modelled_error, plan_for_rtol)
 
 FT = 0.3048
 

@@ -102,14 +102,17 @@ class Resolution:
     melt_width: float
 
 
-#: Melting-step width [K] used when none is asked for. The width w is not a refinement
-#: parameter of the levels: the bias it puts on the critical height is first order in w
-#: (below), and the number of time steps grows steeply as w shrinks (each HE cell's melting
-#: kink must be resolved: 3,356 steps at level 3 with w = 0.25 K, 729 with w = 2 K). The
-#: solver therefore picks w from its tolerance (skidmc.solver.melt_width_for_rtol) and keeps
-#: it the same at every level, so that the levels' errors (and Richardson extrapolation) see
-#: only the mesh and the time steps.
-DEFAULT_MELT_WIDTH = 1.0
+#: Melting-step width at level 0 [K]; the width at level L is at least
+#: MELT_WIDTH_LEVEL0 * 2**-L (:func:`melt_width_floor`), the rule with which the levels' error
+#: model (skidmc.solver.ERROR_LEVEL0, RICHARDSON_ERROR_LEVEL0) was first calibrated
+#: (results/validation/refinement.md). A much narrower step is not resolved by the level's
+#: cells and steps (level 1 with w = 0.013 K is off by 8e-3); at the floor the width's bias is
+#: part of the level's modelled error. Above it, w is not a refinement parameter: its bias
+#: on the critical height is first order in w (below), and the number of time steps grows
+#: steeply as w shrinks (each HE cell's melting kink must be resolved: 3,356 steps at level 3
+#: with w = 0.25 K, 729 with w = 2 K). The solver therefore picks w from its tolerance
+#: (skidmc.solver.melt_width_for_rtol) and keeps it the same at every level of one search.
+MELT_WIDTH_LEVEL0 = 2.0
 
 #: Bound on the critical height's relative bias per kelvin of melting width [1/K]: measured
 #: at level 2.5 against the sharp limit (``python scripts/melt_width_bias.py``,
@@ -121,14 +124,21 @@ MELT_WIDTH_BIAS_PER_K = 2.0e-4
 #: divides the step tolerance by 8 (BDF2: step ~ tol^(1/3), so the time step halves),
 #: so that both spatial and temporal errors fall ~4x per level (second order).
 BASE_RESOLUTION = Resolution(cells_per_medium=24, first_cell_fraction=0.5, tol_temperature=0.5,
-                             melt_width=DEFAULT_MELT_WIDTH)
+                             melt_width=MELT_WIDTH_LEVEL0)
 
 
-def resolution_for_level(level, melt_width=DEFAULT_MELT_WIDTH):
+def melt_width_floor(level):
+    """Narrowest melting-step width used at refinement level ``level`` [K]."""
+    return MELT_WIDTH_LEVEL0 * 2.0 ** (-level)
+
+
+def resolution_for_level(level, melt_width=None):
     """Resolution of refinement level ``level`` (float allowed) [see :data:`BASE_RESOLUTION`].
 
-    ``melt_width`` [K] is carried unchanged (see :data:`DEFAULT_MELT_WIDTH`).
+    ``melt_width`` [K] is carried unchanged; default :func:`melt_width_floor` of ``level``.
     """
+    if melt_width is None:
+        melt_width = melt_width_floor(level)
     scale = 2.0 ** level
     return Resolution(
         cells_per_medium=max(8, int(round(BASE_RESOLUTION.cells_per_medium * scale))),
@@ -252,7 +262,7 @@ class SkidModel:
 
 def build_model(scene, resolution=None, *, level=0.0, melting=True,
                 runaway_fraction=DEFAULT_RUNAWAY_FRACTION, horizon=HORIZON_EXIT_TIMES,
-                meshes=True, melt_width=DEFAULT_MELT_WIDTH):
+                meshes=True, melt_width=None):
     """Infer the model a scene needs and build its meshes.
 
     Parameters
@@ -263,8 +273,9 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         Numerical resolution; default ``resolution_for_level(level)``.
     level : float
         Refinement level used when ``resolution`` is not given.
-    melt_width : float
-        Width of the smoothed melting step [K], used when ``resolution`` is not given.
+    melt_width : float, optional
+        Width of the smoothed melting step [K], used when ``resolution`` is not given;
+        default :func:`melt_width_floor` of ``level``.
     melting : bool
         Model melting of the HE (enthalpy plateau at T_m) when the scene has a
         heat of fusion.

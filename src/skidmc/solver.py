@@ -25,7 +25,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from skidmc.errors import SceneError
-from skidmc.model import MELT_WIDTH_BIAS_PER_K, build_model
+from skidmc.model import MELT_WIDTH_BIAS_PER_K, build_model, melt_width_floor
 from skidmc.thermal import (INFO_EVENT, INFO_FAILED, INFO_REJECTED, INFO_STEPS,
                             INFO_T_EVENT, INFO_T_EXIT_MAX, INFO_T_MAX, INFO_Y_EXIT_MAX,
                             simulate_kernel)
@@ -89,20 +89,6 @@ GO_SECANT_SPAN = 0.1
 #: and 0.106 missed by 1.4e-3); 1.0 leaves a factor 2.5 to spare.
 GO_BEND = 1.0
 RICHARDSON_MIN_LEVEL = 1.5
-
-
-#: Narrowest melting step at level L [K]: MELT_WIDTH_LEVEL0 * 2**-L, the width with which
-#: the levels' error model (ERROR_LEVEL0, RICHARDSON_ERROR_LEVEL0) was first calibrated
-#: (results/validation/refinement.md, where the width shrank with the level). A much narrower
-#: step is not resolved by the level's cells and steps (level 1 with w = 0.013 K is off by
-#: 8e-3): the width never goes below this floor, and at the floor its bias is part of the
-#: level's modelled error.
-MELT_WIDTH_LEVEL0 = 2.0
-
-
-def melt_width_floor(level):
-    """Narrowest melting-step width used at refinement level ``level`` [K]."""
-    return MELT_WIDTH_LEVEL0 * 2.0 ** (-level)
 
 
 def melt_width_for_rtol(rtol, level=0.0):
@@ -399,7 +385,7 @@ def _melt_bias(terms, melt_width, level):
     """Bound on the relative bias of the smoothed melting step [1].
 
     0 without melting, and at the level's floor width, where the bias is part of the
-    level's modelled error (:data:`MELT_WIDTH_LEVEL0`).
+    level's modelled error (:data:`skidmc.model.MELT_WIDTH_LEVEL0`).
     """
     if "melting" not in terms or melt_width <= melt_width_floor(level) * (1.0 + 1e-9):
         return 0.0
