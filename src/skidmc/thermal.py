@@ -138,26 +138,6 @@ def adiabatic_induction_time(temperature, prefactor, activation_temperature, adi
                              * np.exp(-activation_temperature / temperature))
 
 
-@njit(cache=True)
-def _solve_tridiagonal(lower, diag, upper, rhs, cp, dp, out):
-    """Thomas algorithm; ``lower[i]`` couples i to i-1, ``upper[i]`` couples i to i+1.
-
-    One division per row (the pivot's inverse): the sweep is a chain of dependent
-    operations, so its latency, not its operation count, sets the cost.
-    """
-    n = diag.shape[0]
-    inv = 1.0 / diag[0]
-    cp[0] = upper[0] * inv
-    dp[0] = rhs[0] * inv
-    for i in range(1, n):
-        inv = 1.0 / (diag[i] - lower[i] * cp[i - 1])
-        cp[i] = upper[i] * inv
-        dp[i] = (rhs[i] - lower[i] * dp[i - 1]) * inv
-    out[n - 1] = dp[n - 1]
-    for i in range(n - 2, -1, -1):
-        out[i] = dp[i] - cp[i] * out[i + 1]
-
-
 @njit(cache=True, nogil=True)
 def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                     he_density, latent_heat, melting_point, melt_width,
@@ -231,11 +211,6 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     y_new = np.zeros(n_he)
     hist_h = np.empty(n)
     hist_y = np.empty(n_he)
-    lower = np.zeros(n)
-    diag = np.empty(n)
-    upper = np.zeros(n)
-    resid = np.empty(n)
-    delta = np.empty(n)
     cp = np.empty(n)
     dp = np.empty(n)
 
@@ -315,25 +290,28 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
             a2 = om * om / (1.0 + 2.0 * om)
             beta = (1.0 + om) / (1.0 + 2.0 * om)
         bdt = beta * dt
+        # History terms, and Newton's start: the linear extrapolation of the temperatures.
+        om = dt / dt_prev if n_hist > 0 else 0.0
         for i in range(n):
             hist_h[i] = a1 * h[i] - a2 * h_prev[i]
+            temp_new[i] = temp[i] + om * (temp[i] - temp_prev[i])
         for j in range(n_he):
             hist_y[j] = a1 * y[j] - a2 * y_prev[j]
 
-        # Newton starts from the linear extrapolation of the temperatures.
-        if n_hist == 0:
-            for i in range(n):
-                temp_new[i] = temp[i]
-        else:
-            om = dt / dt_prev
-            for i in range(n):
-                temp_new[i] = temp[i] + om * (temp[i] - temp_prev[i])
-
         q = _flux(t_new, q0, slide_s, slide_c, omega, t_exit, q_ext)
+        q_target = bdt * (1.0 - q_share_he) * q
+        q_he = bdt * q_share_he * q
         converged = False
         for _it in range(12):
             info[INFO_NEWTON_ITERATIONS] += 1
-            # Residual R = w (h(T) - hist) - bdt [fluxes + w S(T)]; Jacobian tridiagonal.
+            # One pass assembles each row of the Newton system J delta = -R, with
+            # R = w (h(T) - hist) - bdt [fluxes + w S(T)] and J tridiagonal, and at once
+            # eliminates it (Thomas forward sweep, one division per row): the row's
+            # assembly overlaps the division chain of the sweep.
+            flow_in = 0.0   # bdt * heat into cell i from cell i-1
+            g_low = 0.0     # bdt * conductance of the face below cell i
+            cp_prev = 0.0
+            dp_prev = 0.0
             for i in range(n):
                 if i >= n_target:
                     h_new[i], dhdt[i] = _he_enthalpy(temp_new[i], rho_c[i], latent_v,
@@ -341,45 +319,50 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                 else:
                     h_new[i] = rho_c[i] * temp_new[i]
                     dhdt[i] = rho_c[i]
-                resid[i] = width[i] * (h_new[i] - hist_h[i])
-                diag[i] = width[i] * dhdt[i]
-                lower[i] = 0.0
-                upper[i] = 0.0
-            for f in range(n - 1):
-                g = face_conductance[f]
-                flow = g * (temp_new[f + 1] - temp_new[f])      # heat into cell f from f+1
-                resid[f] -= bdt * flow
-                resid[f + 1] += bdt * flow
-                diag[f] += bdt * g
-                upper[f] -= bdt * g
-                diag[f + 1] += bdt * g
-                lower[f + 1] -= bdt * g
-            resid[n_target - 1] -= bdt * (1.0 - q_share_he) * q
-            resid[n_target] -= bdt * q_share_he * q
-            if reactive:
-                for j in range(n_he):
-                    i = n_target + j
-                    if temp_new[i] < t_cold:
-                        continue
+                r = width[i] * (h_new[i] - hist_h[i]) + flow_in
+                d = width[i] * dhdt[i] + g_low
+                if i < n - 1:
+                    g_up = bdt * face_conductance[i]
+                    flow_out = g_up * (temp_new[i + 1] - temp_new[i])  # into i from i+1
+                    r -= flow_out
+                    d += g_up
+                else:
+                    g_up = 0.0
+                    flow_out = 0.0
+                if i == n_target - 1:
+                    r -= q_target
+                elif i == n_target:
+                    r -= q_he
+                if reactive and i >= n_target and temp_new[i] >= t_cold:
+                    j = i - n_target
                     inv_t = 1.0 / temp_new[i]
                     k = prefactor * np.exp(-activation_temperature * inv_t)
                     inv_denom = 1.0 / (1.0 + bdt * k)
                     source = q_v * k * (1.0 - hist_y[j]) * inv_denom
                     dsource = source * activation_temperature * inv_t * inv_t * inv_denom
-                    resid[i] -= bdt * width[i] * source
-                    diag[i] -= bdt * width[i] * dsource
-            for i in range(n):
-                resid[i] = -resid[i]
-            _solve_tridiagonal(lower, diag, upper, resid, cp, dp, delta)
+                    r -= bdt * width[i] * source
+                    d -= bdt * width[i] * dsource
+                # Forward sweep: lower = -g_low, upper = -g_up.
+                inv = 1.0 / (d + g_low * cp_prev)
+                cp_prev = -g_up * inv
+                dp_prev = (-r + g_low * dp_prev) * inv
+                cp[i] = cp_prev
+                dp[i] = dp_prev
+                flow_in = flow_out
+                g_low = g_up
+            # Back substitution, fused with the update of the iterate.
             change = 0.0
             finite = True
-            for i in range(n):
-                temp_new[i] += delta[i]
-                d = abs(delta[i])
-                if not np.isfinite(d) or temp_new[i] <= 0.0:
+            delta_next = 0.0
+            for i in range(n - 1, -1, -1):
+                d_i = dp[i] - cp[i] * delta_next
+                delta_next = d_i
+                temp_new[i] += d_i
+                a = abs(d_i)
+                if not np.isfinite(a) or temp_new[i] <= 0.0:
                     finite = False
-                if d > change:
-                    change = d
+                if a > change:
+                    change = a
             if not finite:
                 break
             if change < newton_tol:
@@ -391,30 +374,30 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
         t_max = -np.inf
         y_max = 0.0
         if converged:
+            # One pass: enthalpies, fraction reacted (implicit, closed form), maxima, and the
+            # local error - BDF2 corrector minus the quadratic extrapolation through the last
+            # three accepted temperatures (Newton divided differences).
+            estimate = n_hist >= 2
+            inv_dt1 = 1.0 / dt_prev
+            inv_dt0 = 1.0 / dt_prev2
+            c2 = dt * (dt + dt_prev) / (dt_prev + dt_prev2)
             for i in range(n):
                 if i >= n_target:
                     h_new[i], dhdt[i] = _he_enthalpy(temp_new[i], rho_c[i], latent_v,
                                                      melting_point, melt_width)
+                    j = i - n_target
+                    if reactive and temp_new[i] >= t_cold:
+                        k = prefactor * np.exp(-activation_temperature / temp_new[i])
+                        y_new[j] = (hist_y[j] + bdt * k) / (1.0 + bdt * k)
+                    else:
+                        y_new[j] = hist_y[j]
+                    if temp_new[i] > t_max:
+                        t_max = temp_new[i]
+                    if y_new[j] > y_max:
+                        y_max = y_new[j]
                 else:
                     h_new[i] = rho_c[i] * temp_new[i]
-            for j in range(n_he):
-                i = n_target + j
-                if reactive and temp_new[i] >= t_cold:
-                    k = prefactor * np.exp(-activation_temperature / temp_new[i])
-                    y_new[j] = (hist_y[j] + bdt * k) / (1.0 + bdt * k)
-                else:
-                    y_new[j] = hist_y[j]
-                if temp_new[i] > t_max:
-                    t_max = temp_new[i]
-                if y_new[j] > y_max:
-                    y_max = y_new[j]
-            # Local error: BDF2 corrector minus the quadratic extrapolation through the
-            # last three accepted temperatures (Newton divided differences).
-            if n_hist >= 2:
-                inv_dt1 = 1.0 / dt_prev
-                inv_dt0 = 1.0 / dt_prev2
-                c2 = dt * (dt + dt_prev) / (dt_prev + dt_prev2)
-                for i in range(n):
+                if estimate:
                     d1 = (temp[i] - temp_prev[i]) * inv_dt1
                     d0 = (temp_prev[i] - temp_prev2[i]) * inv_dt0
                     pred = temp[i] + dt * d1 + c2 * (d1 - d0)
@@ -446,17 +429,11 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                 break
             continue
 
-        # Accept the step.
+        # Accept the step: rotate the state buffers (no copies).
         steps += 1
-        for i in range(n):
-            temp_prev2[i] = temp_prev[i]
-            temp_prev[i] = temp[i]
-            temp[i] = temp_new[i]
-            h_prev[i] = h[i]
-            h[i] = h_new[i]
-        for j in range(n_he):
-            y_prev[j] = y[j]
-            y[j] = y_new[j]
+        temp_prev2, temp_prev, temp, temp_new = temp_prev, temp, temp_new, temp_prev2
+        h_prev, h, h_new = h, h_new, h_prev
+        y_prev, y, y_new = y, y_new, y_prev
         dt_prev2 = dt_prev
         dt_prev = dt
         n_hist += 1
