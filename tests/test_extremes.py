@@ -34,7 +34,7 @@ from hypothesis import strategies as st
 from skidmc import mechanics
 from skidmc.model import build_model
 from skidmc.scene import make_scene
-from skidmc.solver import critical_height
+from skidmc.solver import critical_height, simulate
 
 RTOL = 1e-2
 H_MIN = 0.01     # [m] 1 cm
@@ -229,7 +229,6 @@ def test_matrix_case(case_id, preset, overrides, outcomes, flags):
 
 def test_censoring_agrees_with_a_direct_simulation():
     # "above" means no event at h_max, "below" an event at h_min: checked on the model itself.
-    from skidmc.solver import simulate
 
     for preset, overrides, bound in [
         ("paper-quartz", {**COPPER, "mu": 1e-3}, H_MAX),
@@ -252,6 +251,23 @@ def test_self_heating_billet_goes_at_once():
     assert res.censored == "below"
     assert "self_heating" in res.flags
     assert build_model(scene).rest_time < res.exit_time
+
+
+def test_self_heating_just_after_the_exit_is_censored_above():
+    # Found by the slow property test: at 405 K with E/R = 15,000 K and Z = 2.5e16 1/s the bulk
+    # runs away ~2 % after the exit whatever the height (nearly normal impact, mu = 0.007: little
+    # frictional heat), so the margin is ~0.02 and flat in H. The bracketing steps (1.2 m + a few
+    # percent) used to stall short of h_max; they now double, and the search reaches the bound.
+    scene = make_scene(preset="paper-quartz", **{
+        "mu": 0.006737946999085467, "angle": 1.0, "flow_stress": 24154952.7535753,
+        "billet_mass": 3.955076722920577, "initial_temperature": 405.0,
+        "kinetics.activation_temperature": 15000.0, "kinetics.prefactor": 2.4809424597909428e16,
+        "target.conductivity": 2.718281828459045})
+    res = solve(scene)
+    assert res.censored == "above"
+    assert "self_heating" in res.flags
+    sim = simulate(build_model(scene, level=res.level), H_MAX)
+    assert not sim.event and 0.0 < sim.margin < 0.05   # the premise: flat, just no-go
 
 
 def test_flags_fit_storage_width():

@@ -656,6 +656,10 @@ def _brent(margin, x_min, x_max, x_tol, model, h_guess, overshoot=0.05):
     x = math.log(h_guess) if h_guess else 0.0  # 1 m by default
     x = min(max(x, x_min), x_max)
     lo = hi = None  # ln H of the highest no-go and the lowest go
+    # Smallest bracketing step, doubled after every step: a margin that hardly depends on H
+    # (e.g. a self-heating HE whose event time is set by its bulk, not by friction) still
+    # reaches the search bounds within the loop.
+    min_step = overshoot
     for _ in range(60):
         m = margin(x)
         if m > 0.0:
@@ -670,11 +674,12 @@ def _brent(margin, x_min, x_max, x_tol, model, h_guess, overshoot=0.05):
             # t_ev ~ 1/H: the root lies about m above; with no event in the horizon, at
             # least `horizon` above. Overshoot a little so one step usually brackets.
             step = 1.2 * m + overshoot if math.isfinite(m) else 2.0 * horizon
-            x = min(x + step, x_max)
+            x = min(x + max(step, min_step), x_max)
         else:
             if x <= x_min:
                 return x_min, "below"
-            x = max(x + 1.2 * m - overshoot, x_min)
+            x = max(x - max(-1.2 * m + overshoot, min_step), x_min)
+        min_step *= 2.0
     else:  # pragma: no cover - the loop always brackets or censors within 60 steps
         raise SolverError("could not bracket the critical height")
 
