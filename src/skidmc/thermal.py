@@ -60,6 +60,10 @@ _BDF2_ERROR_CONSTANT = 2.0 / 11.0
 #: 10-18 % of the Newton iterations (3.1 -> 2.6 per step at level 1.5).
 NEWTON_TOLERANCE_FRACTION = 0.1
 
+#: Reaction sources are skipped in cells too cold to release this fraction of the step
+#: tolerance [1] over the whole run (see ``t_cold`` in the kernel).
+COLD_SOURCE_FRACTION = 1e-3
+
 #: Step-size controller: the next step is STEP_SAFETY * (tol / err)^(1/3) times the last
 #: (growth capped at 2, within BDF2's variable-step zero-stability bound 1 + sqrt(2)); after
 #: a rejection the retry uses RETRY_SAFETY instead. Measured at level 1.5 on the report
@@ -233,11 +237,14 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     if reactive and adiabatic_rise > 0.0:
         t_relax = runaway_temperature(prefactor, activation_temperature, adiabatic_rise,
                                       t_exit, 1e-9)
-    # Below t_cold the fraction a cell could react over the whole run, Z exp(-Ta/T) t_end,
-    # is under 1e-15: its source is skipped (it would not change a double).
+    # Below t_cold, the heat a cell's reaction could release over the whole run,
+    # dT_ad Z exp(-Ta/T) t_end, is under COLD_SOURCE_FRACTION of the step tolerance [K]: its
+    # source (and exponential) is skipped. Measured on the report presets at level 1.5: the
+    # event time moves by ~1e-10 relative, the simulation runs ~9 % faster.
     t_cold = 0.0
-    if reactive and prefactor * t_end > 1e15:
-        t_cold = activation_temperature / np.log(prefactor * t_end * 1e15)
+    if reactive and adiabatic_rise > 0.0:
+        t_cold = activation_temperature / np.log(max(
+            prefactor * t_end * adiabatic_rise / (COLD_SOURCE_FRACTION * tol_temperature), 2.0))
 
     for i in range(n):
         temp[i] = initial_temperature
