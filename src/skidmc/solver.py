@@ -361,12 +361,12 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         return res
 
     # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
-    # (4 d_L + d_{L-1}) / 3, so each search gets 3/5 of the root-finder share.
-    x_tol = 0.6 * ROOT_SHARE * rtol
-    coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
+    # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder share and the
+    # fine one half of it, (4 / 2 + 1) / 3 = 1 share in all.
+    coarse = _search(scene, rtol, level - 1.0, ROOT_SHARE * rtol, h_guess=h_guess, **common)
     # The fine root lies above the coarse one by less than the coarse level's error (the
     # errors are negative and shrink with the level): the go-side search starts that far up.
-    fine = _search(scene, rtol, level, x_tol,
+    fine = _search(scene, rtol, level, 0.5 * ROOT_SHARE * rtol,
                    h_guess=coarse.critical_height if coarse.censored is None else None,
                    overshoot=modelled_error(level - 1.0),
                    slope=_margin_slope(coarse.history), go_slope=_go_slope(coarse.history),
