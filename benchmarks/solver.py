@@ -18,7 +18,7 @@ median error-cost front, measured side by side in this run) and the Pareto figur
 
 Usage::
 
-    python benchmarks/solver.py            # all presets, ~15-25 min (the peer dominates)
+    python benchmarks/solver.py            # all presets, ~12-25 min (the peer dominates)
     python benchmarks/solver.py --quick    # two presets, fewer tolerances (~5 min)
 """
 
@@ -53,7 +53,7 @@ OUT = ROOT / "results" / "benchmarks"
 
 PRESETS = ["paper-quartz", "paper-alumina-smooth", "paper-alumina-rough", "paper-gold",
            "paper2-quartz"]
-SKIDMC_RTOLS = [3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4]
+SKIDMC_RTOLS = [3e-2, 1e-2, 5e-3, 3e-3, 1e-3, 3e-4, 1e-4]
 # solve_ivp rtol; the mesh is refined with it (n_cells) so that neither error dominates.
 PEER_SETTINGS = [(1e-3, 40), (1e-4, 80), (1e-5, 160)]
 REFERENCE_RTOL = 3e-5
@@ -200,6 +200,14 @@ def report(rows, presets):
             f" ms per critical height, median error "
             f"{statistics.median(r['rel_error'] for r in at_1e3):.1e}, worst "
             f"{max(r['rel_error'] for r in at_1e3):.1e} (target: <= 5 ms at 0.1 % error).")
+    # Directly measured, no interpolation: the cheapest setting whose median error is <= 0.1 %.
+    within = [(t, setting, e) for setting, e, t in full if e <= 1e-3]
+    if within:
+        t, setting, e = min(within)
+        worst = max(r["rel_error"] for r in rows
+                    if r["method"] == "skidmc full" and r["setting"] == setting)
+        lines.append(f"- cheapest setting measured with median error <= 1e-3: {setting}, median "
+                     f"{1e3 * t:.3g} ms per critical height, median error {e:.1e}, worst {worst:.1e}.")
     for error in (1e-2, 3e-3, 1e-3):
         ts, tp = _cost_at_error(full, error), _cost_at_error(peer_front, error)
         if ts and tp:
