@@ -8,9 +8,10 @@ from skidmc.errors import SceneError
 from skidmc.presets import PAPER_TABLE_VIII, get_preset
 from skidmc.scene import make_scene
 from skidmc.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
-from skidmc.solver import (DISCRETISATION_SHARE, ERROR_LEVEL0, MAX_MELT_WIDTH, MELT_SHARE,
-                           ROOT_SHARE, critical_height, extrapolated_error, level_for_rtol,
-                           melt_width_for_rtol, modelled_error, plan_for_rtol)
+from skidmc.solver import (CARRIED_GO_SLOPE_ERROR, DISCRETISATION_SHARE, ERROR_LEVEL0,
+                           MAX_MELT_WIDTH, MELT_SHARE, ROOT_SHARE, critical_height,
+                           extrapolated_error, level_for_rtol, melt_width_for_rtol,
+                           modelled_error, plan_for_rtol, root_tolerance)
 
 FT = 0.3048
 
@@ -142,6 +143,20 @@ def test_plan_for_rtol_meets_its_error_model_and_is_never_finer_than_plain():
     assert plan_for_rtol(1e-2) == (0.5, False)
 
 
+def test_root_tolerance_takes_what_the_plan_leaves_of_rtol():
+    for rtol in (3e-2, 1e-2, 5e-3, 3e-3, 1e-3, 3e-4, 1e-4):
+        level, extrapolate = plan_for_rtol(rtol)
+        width = melt_width_for_rtol(rtol, level)
+        x_tol = root_tolerance(rtol, level, extrapolate, width)
+        discretisation = extrapolated_error(level) if extrapolate else modelled_error(level)
+        melt = MELT_WIDTH_BIAS_PER_K * width if width > melt_width_floor(level) else 0.0
+        assert x_tol >= ROOT_SHARE * rtol
+        # The three modelled errors add up to rtol, never more.
+        assert discretisation + melt + x_tol <= rtol * (1 + 1e-12)
+    # A forced level coarser than rtol asks for still leaves the root finder its share.
+    assert root_tolerance(1e-4, 0.0, False, 2.0) == pytest.approx(ROOT_SHARE * 1e-4)
+
+
 @pytest.mark.parametrize("name", ["paper-quartz", "paper-alumina-rough"])
 def test_richardson_value_within_its_error_estimate_of_a_finer_level(name):
     # The default (rtol 1e-3) extrapolates levels 0.5 and 1.5. Against a plain level-3
@@ -236,6 +251,24 @@ def test_go_side_root_from_a_close_guess_takes_two_simulations():
     x = _go_side_root(margin, root - 0.004, -1.32, x_tol, -10.0, 10.0, guess_error=0.006)
     assert abs(x - root) < x_tol
     assert len(calls) == 2
+
+
+@pytest.mark.parametrize("slope_error", [-CARRIED_GO_SLOPE_ERROR, 0.0, CARRIED_GO_SLOPE_ERROR])
+def test_go_side_root_accepts_one_go_point_along_a_carried_slope(slope_error):
+    from skidmc.solver import _go_side_root
+
+    # A coarse level's slope off by up to its bound, the first point 0.1 % above the root:
+    # the extrapolation error (<= 0.15 * 1e-3) is below x_tol / 2, so one simulation does.
+    root, x_tol = -1.0, 4e-4
+    margin, calls = _kinked_margin(root)
+    x = _go_side_root(margin, root - 0.002, -1.3 * (1 + slope_error), x_tol, -10.0, 10.0,
+                      guess_error=0.003)
+    assert len(calls) == 1
+    assert abs(x - root) < 0.5 * x_tol
+    # With no slope carried over (the default slope, 30 % uncertain), one point is not enough.
+    margin, calls = _kinked_margin(root)
+    x = _go_side_root(margin, root - 0.002, None, x_tol, -10.0, 10.0, guess_error=0.003)
+    assert len(calls) >= 2 and abs(x - root) < x_tol
 
 
 def test_go_side_root_gives_up_on_a_margin_that_is_not_monotone():

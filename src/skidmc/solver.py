@@ -49,7 +49,9 @@ DEFAULT_H_MAX = 1e4
 #: spare. The tolerance rtol is shared three ways: DISCRETISATION_SHARE to the mesh and time
 #: steps (the solver picks the lowest (half-)level whose modelled error is below it),
 #: MELT_SHARE to the smoothing of the melting step (its width, :func:`melt_width_for_rtol`)
-#: and ROOT_SHARE to the root finder (on ln H).
+#: and ROOT_SHARE to the root finder (on ln H). The root finder also gets what the chosen
+#: plan leaves unused of the other two shares (:func:`root_tolerance`): levels come in
+#: half steps, so the modelled discretisation error is often well below its share.
 ERROR_LEVEL0 = 9.0e-3
 DISCRETISATION_SHARE = 0.6
 MELT_SHARE = 0.2
@@ -82,7 +84,11 @@ FAST_GUESS_ERROR = 0.02
 DEFAULT_GO_SLOPE = -1.25
 DEFAULT_GO_SLOPE_ERROR = 0.3
 #: Relative uncertainty of a go-side slope carried over from a coarser level's search.
-CARRIED_GO_SLOPE_ERROR = 0.1
+#: Measured against the fine level's own secant from the root to 0.2-2 % above it, on the
+#: report presets (gold aside: stops sliding) for the Richardson pairs (0, 1) and (0.5, 1.5):
+#: 0.05 % to 9.6 % (alumina 50-80 uin, pair (0.5, 1.5)); 0.15 leaves 1.5x to spare. It
+#: bounds the error of a root extrapolated from one fine go point (:func:`_go_side_root`).
+CARRIED_GO_SLOPE_ERROR = 0.15
 #: Go points farther than this from the root [1, in ln H] are not used for the secant slope.
 GO_SECANT_SPAN = 0.1
 #: Bend of the go-side margin [1]: a secant through go points at distances d_a < d_b (in
@@ -102,6 +108,21 @@ def melt_width_for_rtol(rtol, level=0.0):
     """
     return max(melt_width_floor(level),
                min(MAX_MELT_WIDTH, MELT_SHARE * rtol / MELT_WIDTH_BIAS_PER_K))
+
+
+def root_tolerance(rtol, level, extrapolate, melt_width):
+    """Tolerance of the root finder on ln H [1] for a plan ``(level, extrapolate)``.
+
+    What ``rtol`` leaves after the modelled discretisation error of the plan
+    (:func:`modelled_error` or :func:`extrapolated_error`) and the melting width's bias bound,
+    and never less than ROOT_SHARE * rtol: the three modelled errors then add up to at most
+    ``rtol`` (or to the plan's error plus ROOT_SHARE * rtol when a forced level is coarser
+    than ``rtol`` asks for).
+    """
+    discretisation = extrapolated_error(level) if extrapolate else modelled_error(level)
+    melt = (MELT_WIDTH_BIAS_PER_K * melt_width
+            if melt_width > melt_width_floor(level) * (1.0 + 1e-9) else 0.0)
+    return max(ROOT_SHARE * rtol, rtol - discretisation - melt)
 
 
 def modelled_error(level):
@@ -354,21 +375,22 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         melt_width = melt_width_for_rtol(rtol, level)
     common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
                   runaway_fraction=runaway_fraction, melt_width=float(melt_width))
+    x_tol = root_tolerance(rtol, level, extrapolate, melt_width)
     if not extrapolate:
-        res = _search(scene, rtol, level, ROOT_SHARE * rtol, model=model,
-                      h_guess=h_guess, **common)
+        res = _search(scene, rtol, level, x_tol, model=model, h_guess=h_guess, **common)
         res.wall_time = time.perf_counter() - start
         return res
 
     # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
-    # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder share and the
-    # fine one half of it, (4 / 2 + 1) / 3 = 1 share in all.
-    coarse = _search(scene, rtol, level - 1.0, ROOT_SHARE * rtol, h_guess=h_guess, **common)
-    # The fine root lies above the coarse one by less than the coarse level's error (the
-    # errors are negative and shrink with the level): the go-side search starts that far up.
-    fine = _search(scene, rtol, level, 0.5 * ROOT_SHARE * rtol,
+    # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
+    # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
+    coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
+    # The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
+    # errors are negative and shrink 4x per level; the fine level keeps 1/4 of it): the
+    # go-side search starts that far up, which lands on the go side within the error model.
+    fine = _search(scene, rtol, level, 0.5 * x_tol,
                    h_guess=coarse.critical_height if coarse.censored is None else None,
-                   overshoot=modelled_error(level - 1.0),
+                   overshoot=0.75 * modelled_error(level - 1.0),
                    slope=_margin_slope(coarse.history), go_slope=_go_slope(coarse.history),
                    **common)
     fine.evaluations += coarse.evaluations
@@ -378,7 +400,7 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         fine.critical_height += correction
         fine.richardson_correction = correction / fine.critical_height
         fine.extrapolated = True
-        fine.error_estimate = (extrapolated_error(level) + ROOT_SHARE * rtol
+        fine.error_estimate = (extrapolated_error(level) + x_tol
                                + _melt_bias(fine.terms, melt_width, level))
     return fine
 
@@ -411,7 +433,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
                             **kwargs)
     base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
                 exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
-                error_estimate=(modelled_error(level) + ROOT_SHARE * rtol
+                error_estimate=(modelled_error(level) + x_tol
                                 + _melt_bias(model.terms, model.resolution.melt_width,
                                              level)))
 
@@ -517,7 +539,9 @@ def _go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
     a secant through go points only, once the closest go point lies within ``4 x_tol`` of
     it (the extrapolation error is then that distance times the slope's relative change over
     it, far below ``x_tol``) or the secant's modelled bend error (:data:`GO_BEND`) is below
-    ``x_tol / 2``. The secant uses the farthest go point within :data:`GO_SECANT_SPAN`, which
+    ``x_tol / 2``. With one go point and a slope carried from a coarser level, the root is
+    extrapolated along that slope and accepted when its modelled error, the distance times
+    :data:`CARRIED_GO_SLOPE_ERROR`, is below ``x_tol / 2``. The secant uses the farthest go point within :data:`GO_SECANT_SPAN`, which
     keeps the margin's ~1e-5 step-size noise out of the slope.
 
     Each simulation aims just above the predicted root, by the prediction's own uncertainty
@@ -563,7 +587,13 @@ def _go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
                 uncertainty = max(push, bend)
             else:
                 root = xa - ma / slope
-                uncertainty = max(push, slope_error * (xa - root))
+                # Extrapolating with a slope known to slope_error misses the root by
+                # about slope_error (xa - root): one go point suffices when that is small.
+                extrapolation_error = slope_error * (xa - root)
+                if known and extrapolation_error <= 0.5 * x_tol and (
+                        lo is None or root >= lo[0]):
+                    return root
+                uncertainty = max(push, extrapolation_error)
             if lo is not None:
                 if xa - lo[0] <= 4.0 * x_tol:
                     return lo[0] + lo[1] * (xa - lo[0]) / (lo[1] - ma)
