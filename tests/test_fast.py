@@ -230,3 +230,75 @@ def test_extreme_corners(target, mu, angle, t_act):
         assert 1e-3 <= res.critical_height <= 1e4
         assert res.censored in (None, "above", "below")
         assert (res.censored is None) or res.critical_height in (1e-3, 1e4)
+
+
+# --- the fast tier's validity flags: the mesh-less model ----------------------------------------
+
+def _flag_scenes():
+    """Presets and variants that between them set every validity flag."""
+    quartz = get_preset("paper-quartz")
+    variants = [
+        {"mu": 0.0},                                       # no_friction
+        {"mu": 0.9},                                       # stops_sliding
+        {"mu": 4.0, "angle": 20.0},                        # stops_early
+        {"configuration": "vertical", "angle": 30.0},      # normal_force_spin
+        {"initial_temperature": 440.0},                    # self_heating
+        {"kinetics.prefactor": 1e10},                      # hot_ignition
+        {"flow_stress": 1e6},                              # crushed
+        {"angle": 89.0, "mu": 0.01},                       # long_slide
+        {"he.heat_of_fusion": 0.0},
+        {"kinetics.heat_of_reaction": 0.0},
+    ]
+    return [get_preset(n) for n in PRESETS] + [quartz.replace(**v) for v in variants]
+
+
+@pytest.mark.parametrize("melting", [True, False])
+def test_meshless_model_equals_meshed_one(melting):
+    # critical_height(tier="fast") takes its flags from build_model(meshes=False), which skips
+    # the mesh arithmetic: every other field, and the per-height flags, must be the meshed
+    # model's, bit for bit.
+    import dataclasses
+
+    from skidmc.model import build_model
+
+    mesh_fields = {"width", "rho_c", "face_conductance", "n_target", "q_share_he"}
+    seen = set()
+    for scene in _flag_scenes():
+        meshed = build_model(scene, melting=melting)
+        bare = build_model(scene, melting=melting, meshes=False)
+        for f in dataclasses.fields(bare):
+            if f.name not in mesh_fields:
+                a, b = getattr(meshed, f.name), getattr(bare, f.name)
+                assert a == b or (a != a and b != b), f.name  # NaN == NaN here
+        assert bare.n_target == 0 and math.isnan(bare.q_share_he)
+        for arr in (bare.width, bare.rho_c, bare.face_conductance):
+            assert arr.shape == (0,) and arr.dtype == np.float64
+        for h in (1e-3, 0.1, 1.0, 10.0, 100.0, 1e4):
+            assert bare.height_flags(h) == meshed.height_flags(h)
+            seen.update(bare.height_flags(h))
+        seen.update(bare.flags)
+    assert seen == {"no_friction", "stops_sliding", "stops_early", "self_heating",
+                    "hot_ignition", "crushed", "long_slide"}
+
+
+def test_exit_from_constants_equals_contact_and_stop_time():
+    # build_model's exit (mechanics.exit_from_constants, scalar) is the array functions'
+    # contact_time / stop_time, bit for bit, over the whole input range.
+    from skidmc import mechanics
+
+    rng = np.random.default_rng(3)
+    n = 2000
+    mu = np.where(rng.random(n) < 0.1, 0.0, rng.uniform(0.0, 4.9, n))
+    angle = rng.uniform(0.01, 89.99, n)
+    tilt = np.where(rng.random(n) < 0.5, angle, 0.0)
+    sigma, mass, diam = (np.exp(rng.uniform(math.log(a), math.log(b), n))
+                         for a, b in ((1e6, 5e8), (0.1, 100.0), (0.02, 0.5)))
+    kinds = set()
+    for args in zip(mu, angle, tilt, sigma, mass, diam):
+        args = [float(a) for a in args]
+        t_c = float(mechanics.contact_time(*args[3:]))
+        t_s = float(mechanics.stop_time(*args))
+        expected = (t_s, "stops_sliding") if t_s < t_c else (t_c, "rebound")
+        assert mechanics.exit_time(*args) == expected
+        kinds.add(expected[1])
+    assert kinds == {"rebound", "stops_sliding"}

@@ -81,10 +81,13 @@ Units: SI throughout, temperatures in K, angles in degrees at the public interfa
 from __future__ import annotations
 
 import math
+import operator
 
 import numpy as np
 from numba import njit
 from scipy.special import erfc
+
+from skidmc.errors import SceneError
 
 #: Standard gravity [m/s^2] (same as :data:`skidmc.mechanics.STANDARD_GRAVITY`).
 _G = 9.80665
@@ -509,6 +512,9 @@ SCENE_FIELDS = (
     "target_heat_capacity", "target_conductivity",
 )
 
+#: The scene's values in the kernels' argument order (a Scene stores validated floats).
+_scene_values = operator.attrgetter(*SCENE_FIELDS)
+
 _CENSOR_NAMES = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
 _EXIT_NAMES = {EXIT_REBOUND: "rebound", EXIT_STOPS_SLIDING: "stops_sliding"}
 
@@ -563,12 +569,11 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
         ``evaluations=0`` (no PDE run), ``method="fast"``, ``error_estimate`` =
         :data:`ERROR_ESTIMATE` (measured, see module docstring).
     """
-    from skidmc.errors import SceneError
-    from skidmc.solver import HeightResult
+    from skidmc.solver import HeightResult  # not at the top: skidmc.solver imports this module
 
     if not (0.0 < h_min < h_max):
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
-    args = [float(getattr(scene, f)) for f in SCENE_FIELDS]
+    args = list(_scene_values(scene))
     if not melting:
         args[10] = 0.0
     h, cens, t_exit, ecode, melts = fast_height_kernel(

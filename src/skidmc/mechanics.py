@@ -22,6 +22,8 @@ below holds for ``0 <= t <= t_c``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 #: Standard gravity [m/s^2] (the report's g in the drop velocity V0 = sqrt(2 g H)).
@@ -181,13 +183,47 @@ def exit_time(mu, angle, tilt, flow_stress, billet_mass, billet_diameter):
     """End of frictional heating [s] and its cause: ``(t_exit, "rebound" | "stops_sliding")``.
 
     The report's two non-event exits: "hemisphere rebounds" at t_c and "hemisphere
-    stops sliding" at t_s < t_c. Both are independent of the drop height.
+    stops sliding" at t_s < t_c. Both are independent of the drop height. Scalars only.
     """
-    tc = float(contact_time(flow_stress, billet_mass, billet_diameter))
-    ts = float(stop_time(mu, angle, tilt, flow_stress, billet_mass, billet_diameter))
-    if ts < tc:
-        return ts, "stops_sliding"
-    return tc, "rebound"
+    omega = float(angular_frequency(flow_stress, billet_mass, billet_diameter))
+    coefficient = float(sliding_deceleration_coefficient(mu, tilt))
+    return exit_from_constants(omega, coefficient, angle)
+
+
+def exit_from_constants(omega, coefficient, angle):
+    """:func:`exit_time` from the impact's omega [rad/s] and C of Eq. (10) [1] (scalars).
+
+    For callers that already hold omega and C (:func:`skidmc.model.build_model`): the same
+    t_c and t_s as :func:`contact_time` and :func:`stop_time`, bit for bit, without
+    recomputing them or paying for the array machinery of :func:`stop_time` (most of the
+    cost of a mesh-less model, which the fast tier builds for every scene).
+
+    Parameters
+    ----------
+    omega : float
+        :func:`angular_frequency` [rad/s].
+    coefficient : float
+        :func:`sliding_deceleration_coefficient` [1].
+    angle : float
+        phi [deg].
+
+    Returns
+    -------
+    t_exit : float
+        [s].
+    kind : str
+        ``"rebound"`` or ``"stops_sliding"``.
+    """
+    t_c = 0.5 * math.pi / omega
+    # numpy's tan and arccos as in stop_time (not math's): same bits on every platform.
+    tan_phi = float(np.tan(np.radians(angle)))
+    # C >= tan(phi) > 0 in this branch for a valid scene's 0 < phi < 90 deg.
+    if coefficient >= tan_phi:
+        cos_wt = min(max(1.0 - tan_phi / coefficient, -1.0), 1.0)
+        t_s = float(np.arccos(cos_wt)) / omega
+        if t_s < t_c:
+            return t_s, "stops_sliding"
+    return t_c, "rebound"
 
 
 def frictional_flux(t, height, mu, angle, tilt, flow_stress, billet_mass, billet_diameter):

@@ -18,6 +18,7 @@ Inference follows the scene, so a scene that needs nothing more gets nothing mor
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -134,10 +135,14 @@ def melt_width_floor(level):
     return MELT_WIDTH_LEVEL0 * 2.0 ** (-level)
 
 
+@functools.lru_cache(maxsize=256, typed=True)
 def resolution_for_level(level, melt_width=None):
     """Resolution of refinement level ``level`` (float allowed) [see :data:`BASE_RESOLUTION`].
 
     ``melt_width`` [K] is carried unchanged; default :func:`melt_width_floor` of ``level``.
+    Cached (by value and type, so a result never depends on an earlier call): a
+    :class:`Resolution` is immutable, and every model (the fast tier's mesh-less one
+    included, built per result) asks for one of a few levels.
     """
     if melt_width is None:
         melt_width = melt_width_floor(level)
@@ -299,12 +304,15 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     mass = scene.billet_mass
     diameter = scene.billet_diameter
     mu = scene.mu
+    # omega and C once (each mechanics function would recompute them); t_c as
+    # mechanics.contact_time, the same division.
     omega = float(mechanics.angular_frequency(sigma, mass, diameter))
-    t_c = float(mechanics.contact_time(sigma, mass, diameter))
-    t_exit, exit_kind = mechanics.exit_time(mu, scene.angle, scene.tilt, sigma, mass, diameter)
+    t_c = 0.5 * math.pi / omega
+    coefficient = float(mechanics.sliding_deceleration_coefficient(mu, scene.tilt))
+    t_exit, exit_kind = mechanics.exit_from_constants(omega, coefficient, scene.angle)
     phi = math.radians(scene.angle)
     slide_s = math.sin(phi)
-    slide_c = float(mechanics.sliding_deceleration_coefficient(mu, scene.tilt)) * math.cos(phi)
+    slide_c = coefficient * math.cos(phi)
 
     terms = ["frictional_heating", "friction_spin"]
     flags = []
@@ -323,11 +331,6 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     extension = max(exit_shape, mean_shape)
 
     t_end = horizon * t_exit
-    he_rho_c = scene.he_density * scene.he_heat_capacity
-    tg_rho_c = scene.target_density * scene.target_heat_capacity
-    alpha_he = scene.he_conductivity / he_rho_c
-    alpha_tg = scene.target_conductivity / tg_rho_c
-
     heat_of_reaction = scene.kinetics_heat_of_reaction
     prefactor = scene.kinetics_prefactor
     t_a = scene.kinetics_activation_temperature
@@ -354,33 +357,15 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     else:
         latent = 0.0
 
-    # Meshes: first HE cell from the reaction zone, target's scaled by sqrt(alpha2/alpha1)
-    # so both resolve the same time scale; depth from each medium's diffusion length.
-    zone = estimated_reaction_zone(t_exit, alpha_he, scene.initial_temperature, prefactor, t_a)
-    h0_he = resolution.first_cell_fraction * zone
-    h0_tg = h0_he * math.sqrt(alpha_tg / alpha_he)
-    n_cells = resolution.cells_per_medium if meshes else 0
     if meshes:
-        w_he = geometric_widths(h0_he, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_he * t_end),
-                                n_cells)
-        w_tg = geometric_widths(h0_tg, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_tg * t_end),
-                                n_cells)
+        n_cells = resolution.cells_per_medium
+        width, rho_c, face, q_share_he = _meshes(scene, resolution, t_exit, t_end, prefactor,
+                                                 t_a)
     else:
-        w_he = w_tg = np.empty(0)
-
-    width = np.concatenate([w_tg[::-1], w_he])
-    rho_c = np.concatenate([np.full(n_cells, tg_rho_c), np.full(n_cells, he_rho_c)])
-    k = np.concatenate([np.full(n_cells, scene.target_conductivity),
-                        np.full(n_cells, scene.he_conductivity)])
-    # Face conductance between cells i and i+1: resistances w/(2k) in series (the
-    # interface face is Eq. 16's elimination of T_b).
-    half_res = width / (2.0 * k)
-    face = 1.0 / (half_res[:-1] + half_res[1:])
-    q_share_he = math.nan
-    if meshes:
-        g_tg = 1.0 / half_res[n_cells - 1]
-        g_he = 1.0 / half_res[n_cells]
-        q_share_he = g_he / (g_tg + g_he)
+        # No cells: the fields as the mesh arithmetic would leave them, without running it
+        # (the fast tier builds a mesh-less model for every result).
+        n_cells = 0
+        width, rho_c, face, q_share_he = np.empty(0), np.empty(0), np.empty(0), math.nan
 
     return SkidModel(
         omega=omega, contact_time=t_c, exit_time=t_exit, exit_kind=exit_kind,
@@ -398,6 +383,48 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         indent_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * math.cos(phi) / omega,
         slide_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * mean_shape * t_exit,
     )
+
+
+def _meshes(scene, resolution, t_exit, t_end, prefactor, activation_temperature):
+    """Both media's meshes as the kernels take them (see :func:`build_model`).
+
+    Returns
+    -------
+    width : ndarray
+        Cell widths [m], target (far end first) then HE (interface first).
+    rho_c : ndarray
+        Volumetric heat capacity per cell [J/(m^3 K)].
+    face : ndarray
+        Conductance between cells i and i+1 [W/(m^2 K)].
+    q_share_he : float
+        Share of the interface flux that enters the HE [1].
+    """
+    he_rho_c = scene.he_density * scene.he_heat_capacity
+    tg_rho_c = scene.target_density * scene.target_heat_capacity
+    alpha_he = scene.he_conductivity / he_rho_c
+    alpha_tg = scene.target_conductivity / tg_rho_c
+    n_cells = resolution.cells_per_medium
+    # First HE cell from the reaction zone, target's scaled by sqrt(alpha2/alpha1) so both
+    # resolve the same time scale; depth from each medium's diffusion length.
+    zone = estimated_reaction_zone(t_exit, alpha_he, scene.initial_temperature, prefactor,
+                                   activation_temperature)
+    h0_he = resolution.first_cell_fraction * zone
+    h0_tg = h0_he * math.sqrt(alpha_tg / alpha_he)
+    w_he = geometric_widths(h0_he, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_he * t_end),
+                            n_cells)
+    w_tg = geometric_widths(h0_tg, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_tg * t_end),
+                            n_cells)
+    width = np.concatenate([w_tg[::-1], w_he])
+    rho_c = np.concatenate([np.full(n_cells, tg_rho_c), np.full(n_cells, he_rho_c)])
+    k = np.concatenate([np.full(n_cells, scene.target_conductivity),
+                        np.full(n_cells, scene.he_conductivity)])
+    # Face conductance between cells i and i+1: resistances w/(2k) in series (the
+    # interface face is Eq. 16's elimination of T_b).
+    half_res = width / (2.0 * k)
+    face = 1.0 / (half_res[:-1] + half_res[1:])
+    g_tg = 1.0 / half_res[n_cells - 1]
+    g_he = 1.0 / half_res[n_cells]
+    return width, rho_c, face, g_he / (g_tg + g_he)
 
 
 def _ignition_diagnostics(prefactor, activation_temperature, adiabatic_rise,
