@@ -175,7 +175,8 @@ def write(rows: list[dict], mem: list[dict], load: tuple[float, ...],
          "share of the workers' time not spent in `critical_height` (goal <= 5 %). It splits "
          "into start-up (launch to each worker's first chunk: the workers' start and the "
          "parent's preparation, overlapped), in chunk (a chunk's time in its worker beyond the "
-         "solver calls: building each scene from its inputs, `make_scene`) and idle (between "
+         "solver calls: building each sample's scene from its inputs, `SceneColumns` over the "
+         "study's base scene) and idle (between "
          "chunks and after a worker's last one: waiting for the parent, the run's tail)."),
         "",
         ("| study | design | scenes | samples/scene | workers | evaluations | chunks | wall [s] "

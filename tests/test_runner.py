@@ -159,6 +159,48 @@ def test_evaluate_batch_accepts_scenes_and_columns(fake_solver):
     assert list(by_scene.inputs["flow_stress"]) == [base.flow_stress] * 2
 
 
+@pytest.mark.parametrize("preset", ["paper-quartz", "paper-gold"])  # pendulum, vertical drop
+def test_study_columns_fast_path_equals_row_by_row(fake_solver, preset):
+    # A study chunk's columns (SI floats on a base scene) go through SceneColumns; the result must
+    # be the general path's, bit for bit: statuses, reasons, heights and recorded inputs (for a
+    # sample whose scene could not be built, its given values; a vertical drop's derived tilt).
+    base = get_preset(preset)
+    columns = {
+        "mu": np.array([0.132, 0.12, -1.0, 0.2, np.nan, 0.1, 0.11, 0.13]),
+        "angle": np.array([45.0, 30.0, 40.0, 50.0, 45.0, 90.0, 20.0, 44.0]),
+        "initial_temperature": np.array([294.0, 600.0, 290.0, 300.0, 295.0, 296.0, 297.0, 298.0]),
+        "target.conductivity": np.array([1.5, 1.6, 1.7, np.inf, 1.2, 1.3, -0.0, 1.4]),
+    }
+    fast = runner._evaluate_columns(columns, {}, base)
+    general = runner._evaluate_rows(runner._rows(columns), {}, base)
+    _assert_same_batch(fast, general)
+    for k in fast.inputs:  # np.array_equal takes -0.0 for 0.0: bytes do not
+        assert fast.inputs[k].tobytes() == general.inputs[k].tobytes(), k
+    assert list(fast.status).count("failed") >= 5 and "ok" in set(fast.status)
+    assert fast.failure_reason[2] == "invalid inputs: SceneError: mu = -1.0: must be in [0, 5) " \
+        "(a friction coefficient of 5 or more is surely a typo)"
+    # evaluate_batch in process takes the same path; a chunk of a study too.
+    batch = evaluate_batch(columns, base=base)
+    _assert_same_batch(batch, general)
+    chunk = runner._Chunk(0, 8, (base, base), [columns, runner._rows(columns)], {})
+    for res in runner._evaluate_chunk(chunk).results:
+        _assert_same_batch(res, general)
+
+
+def test_columns_outside_the_fast_path_go_row_by_row(fake_solver):
+    quartz = get_preset("paper-quartz")
+    ints = evaluate_batch({"he.density": np.array([1900, 0])}, base=quartz)  # make_scene's
+    assert list(ints.status) == ["ok", "failed"] and ints.inputs["he.density"][0] == 1900.0
+    assert ints.failure_reason[1] == "invalid inputs: SceneError: he.density = 0: must be > 0 " \
+        "kg/m^3"  # the integer as given
+    names = evaluate_batch({"he_density": np.array([1800.0, -1.0])}, base=quartz)
+    assert list(names.status) == ["ok", "failed"] and names.inputs["he.density"][0] == 1800.0
+    unknown = evaluate_batch({"muu": np.array([0.1])}, base=quartz)
+    assert unknown.failure_reason[0].startswith("invalid inputs: UnknownKeyError: muu = 0.1")
+    with pytest.raises(ValueError, match="different lengths"):
+        evaluate_batch({"mu": np.array([0.1]), "angle": np.array([1.0, 2.0])}, base=quartz)
+
+
 def test_non_finite_height_is_a_failure(monkeypatch):
     import skidmc.solver
 

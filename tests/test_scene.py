@@ -350,3 +350,117 @@ def test_errors_pickle(err):  # errors cross process boundaries in the ensemble 
     back = pickle.loads(pickle.dumps(err))
     assert type(back) is type(err)
     assert (back.key, back.value, str(back)) == (err.key, err.value, str(err))
+
+
+# --- SceneColumns: the runner's fast path equals make_scene ---------------------------------------
+
+
+def _outcome(build):
+    """What building a scene gives, comparable bit for bit: the fields (type and exact value) or
+    the error (class, key, value, message)."""
+    try:
+        scene = build()
+    except Exception as exc:  # noqa: BLE001 - compared below
+        return ("error", type(exc), getattr(exc, "key", None), repr(getattr(exc, "value", None)),
+                str(exc))
+    return ("scene", tuple(
+        (f.name, type(v), v.hex() if isinstance(v, float) else v)
+        for f in dataclasses.fields(Scene) for v in [getattr(scene, f.name)]))
+
+
+def _assert_columns_match_make_scene(base, columns):
+    from skidmc.scene import SceneColumns
+
+    columns = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
+    built = SceneColumns(base, columns)
+    m = len(next(iter(columns.values())))
+    assert len(built) == m
+    for i in range(m):
+        row = {k: v[i].item() for k, v in columns.items()}  # as the runner's general path
+        assert [(k, v.hex()) for k, v in built.row(i).items()] == [
+            (k, v.hex()) for k, v in row.items()]  # bitwise (NaN too)
+        general = _outcome(lambda: make_scene(row, preset=base))  # noqa: B023 - called now
+        assert _outcome(lambda: built.scene(i)) == general, row  # noqa: B023
+
+
+_EDGES = [0.0, -0.0, 1e-300, 0.5, 5.0, 45.0, 89.999999, 90.0, 300.0, 553.0, 1e30, -1.0,
+          math.nan, math.inf, -math.inf]
+
+
+@pytest.mark.parametrize("preset", ["paper-quartz", "paper-gold"])  # pendulum, vertical
+@pytest.mark.parametrize("keys", [
+    ("mu",), ("angle",), ("tilt",), ("angle", "tilt"), ("tilt", "angle", "mu"),
+    ("initial_temperature",), ("he.melting_point",), ("he.melting_point", "initial_temperature"),
+    ("he.heat_of_fusion", "kinetics.heat_of_reaction", "target.conductivity", "billet_mass"),
+])
+def test_scene_columns_equal_make_scene_on_edges(preset, keys):
+    base = make_scene(preset=preset)
+    # Every edge value in every column, plus rows mixing a valid value with an edge elsewhere.
+    grid = np.array(np.meshgrid(*[_EDGES] * len(keys))).reshape(len(keys), -1) if len(keys) < 3 \
+        else np.array([np.roll(_EDGES, j) for j in range(len(keys))])
+    _assert_columns_match_make_scene(base, dict(zip(keys, grid)))
+
+
+def test_scene_columns_vertical_tilt_close_to_angle():
+    gold = make_scene(preset="paper-gold")
+    angle = np.array([45.0, 45.0, 45.0, 30.0, 30.0])
+    tilt = angle * np.array([1.0, 1 + 1e-12, 1 + 1e-6, 1.0, 0.5])  # equal, close, off, ...
+    _assert_columns_match_make_scene(gold, {"angle": angle, "tilt": tilt})
+    _assert_columns_match_make_scene(gold, {"tilt": tilt})  # against the base's angle
+    # A base whose tilt is within 1e-9 of its angle but not equal: make_scene makes it the angle.
+    close = make_scene(preset="paper-gold", tilt=45.0 * (1 + 1e-12))
+    assert close.tilt != close.angle
+    _assert_columns_match_make_scene(close, {"mu": np.array([0.1, 0.2])})
+    _assert_columns_match_make_scene(close, {"angle": angle})
+
+
+@given(st.lists(st.tuples(*[st.floats(allow_nan=True, allow_infinity=True)] * 4),
+                min_size=1, max_size=8),
+       st.sampled_from(["paper-quartz", "paper-gold", "paper-alumina-rough"]))
+def test_scene_columns_equal_make_scene_on_any_floats(rows, preset):
+    keys = ("angle", "mu", "initial_temperature", "he.melting_point")
+    _assert_columns_match_make_scene(make_scene(preset=preset), dict(zip(keys, zip(*rows))))
+
+
+def test_scene_columns_scenes_are_ordinary_scenes():
+    from skidmc.scene import SceneColumns
+
+    gold = make_scene(preset="paper-gold")
+    built = SceneColumns(gold, {"angle": np.array([30.0]), "mu": np.array([0.2])})
+    assert built.derived == ("tilt",) and built.keys == ("angle", "mu")
+    assert built.row(0) == {"angle": 30.0, "mu": 0.2}  # the derived tilt is not a given key
+    scene = built.scene(0)
+    assert scene == gold.replace(angle=30.0, mu=0.2) and scene.tilt == 30.0
+    assert hash(scene) == hash(gold.replace(angle=30.0, mu=0.2))
+    assert pickle.loads(pickle.dumps(scene)) == scene
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        scene.mu = 0.3
+    assert SceneColumns(make_scene(preset="paper-quartz"), {"mu": np.array([0.2])}).derived == ()
+
+
+@pytest.mark.parametrize("base, columns", [
+    (None, {"mu": np.array([0.1])}),
+    ("paper-quartz", {"mu": np.array([0.1])}),
+    (make_scene(preset="paper-quartz"), {"mu": np.array([1, 2])}),  # integers: make_scene's
+    (make_scene(preset="paper-quartz"), {"mu": np.array([0.1], dtype=np.float32)}),
+    (make_scene(preset="paper-quartz"), {"mu": np.array(["0.1"], dtype=object)}),
+    (make_scene(preset="paper-quartz"), {"he_density": np.array([1900.0])}),  # attribute name
+    (make_scene(preset="paper-quartz"), {"muu": np.array([0.1])}),
+    (make_scene(preset="paper-quartz"), {"configuration": np.array(["vertical"])}),
+    (make_scene(preset="paper-quartz"), {"mu": np.array([[0.1]])}),
+    (make_scene(preset="paper-quartz"), {"mu": np.array(0.1)}),
+    (make_scene(preset="paper-quartz"), {"mu": np.array([0.1]), "angle": np.array([1.0, 2.0])}),
+    (make_scene(preset="paper-quartz"), [("mu", np.array([0.1]))]),
+])
+def test_scene_columns_refuses_what_is_make_scenes(base, columns):
+    from skidmc.scene import SceneColumns
+
+    assert not SceneColumns.accepts(base, columns)
+    with pytest.raises(ValueError, match="make_scene"):
+        SceneColumns(base, columns)
+
+
+def test_scene_columns_without_columns():
+    from skidmc.scene import SceneColumns
+
+    assert len(SceneColumns(make_scene(preset="paper-quartz"), {})) == 0

@@ -57,7 +57,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from skidmc.errors import SkidmcError
-from skidmc.scene import NUMERIC_KEYS, SI_UNITS, Scene, make_scene
+from skidmc.scene import NUMERIC_KEYS, SI_UNITS, Scene, SceneColumns, make_scene
 
 if TYPE_CHECKING:
     from skidmc.storage import EnsembleFile
@@ -229,8 +229,11 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         from skidmc.presets import get_preset
 
         base = get_preset(base)
+    in_process = scheduler in (None, "local") and (workers or _default_workers()) == 1
+    if in_process and isinstance(scenes, Mapping):
+        return _evaluate_columns(scenes, kwargs, base)
     rows = _rows(scenes)
-    if scheduler in (None, "local") and (workers or _default_workers()) == 1:
+    if in_process:
         return _evaluate_rows(rows, kwargs, base)
     return _evaluate_rows_parallel(rows, kwargs, base, workers, chunk_size, scheduler)
 
@@ -256,6 +259,45 @@ def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None) -> BatchResult:
         (out.critical_height[i], out.status[i], out.evaluations[i], out.flags[i],
          out.failure_reason[i]) = _solve(critical_height, scene, kwargs)
         out.wall_time[i] = time.perf_counter() - t0
+    return out
+
+
+def _evaluate_columns(columns: Mapping, kwargs: dict, base: Scene | None) -> BatchResult:
+    """evaluate_batch of columns ``{key: array}`` in this process (a study chunk's scene).
+
+    Columns of SI floats on a base scene (a study's samples) have their scenes built by
+    :class:`~skidmc.scene.SceneColumns`, which validates whole columns once instead of every key
+    of every row; anything else goes row by row through :func:`_evaluate_rows`. The result is
+    the same either way, bit for bit: the same scenes, the same errors, the same recorded inputs.
+    """
+    columns = {k: np.asarray(v) for k, v in columns.items()}
+    if not SceneColumns.accepts(base, columns):
+        return _evaluate_rows(_rows(columns), kwargs, base)
+    from skidmc.solver import critical_height
+
+    scenes = SceneColumns(base, columns)
+    m = len(scenes)
+    out = _empty_result(m)
+    # The inputs as given (the columns over the base), which _record_given keeps for a row whose
+    # scene cannot be built; a built scene differs from them only in its derived keys.
+    base_values = base.as_dict()
+    for k in NUMERIC_KEYS:
+        out.inputs[k][:] = columns.get(k, base_values[k])
+    derived = [(out.inputs[k], k.replace(".", "_")) for k in scenes.derived]  # attribute names
+    height, status, evaluations = out.critical_height, out.status, out.evaluations
+    flags, failure_reason, wall_time = out.flags, out.failure_reason, out.wall_time
+    for i in range(m):
+        try:
+            scene = scenes.scene(i)
+        except Exception as exc:  # noqa: BLE001 - an invalid sample fails alone, not the run
+            failure_reason[i] = f"invalid inputs: {type(exc).__name__}: {exc}"
+            continue
+        for values, field in derived:
+            values[i] = getattr(scene, field)
+        t0 = time.perf_counter()
+        (height[i], status[i], evaluations[i], flags[i],
+         failure_reason[i]) = _solve(critical_height, scene, kwargs)
+        wall_time[i] = time.perf_counter() - t0
     return out
 
 
@@ -338,7 +380,8 @@ def _peak_rss_mib() -> float:
 def _evaluate_chunk(chunk: _Chunk) -> _ChunkOut:
     """Worker entry point (module level: picklable for processes and dask)."""
     began = time.time()
-    results = [_evaluate_rows(_rows(ov), chunk.options, sc)
+    results = [_evaluate_columns(ov, chunk.options, sc) if isinstance(ov, Mapping)
+               else _evaluate_rows(_rows(ov), chunk.options, sc)
                for sc, ov in zip(chunk.scenes, chunk.overrides)]
     return _ChunkOut(results, os.getpid(), _peak_rss_mib(), began, time.time())
 
