@@ -147,7 +147,8 @@ def fit(scenes):
 
 
 def timing(scenes, repeats=200):
-    """Median us per height: batched kernel and the per-scene Python entry point."""
+    """Median us per height: batched kernel, the per-scene Python entry point, and the
+    public ``critical_height(tier="fast")`` (which adds the full tier's validity flags)."""
     cols = fast.scene_columns([s for _, s in scenes])
     fast.fast_critical_heights(**cols)  # compiled already; warm caches
     per = []
@@ -156,13 +157,16 @@ def timing(scenes, repeats=200):
         fast.fast_critical_heights(**cols)
         per.append((time.perf_counter() - t) / len(scenes))
     batch_us = 1e6 * float(np.median(per))
-    one = []
+    one, public = [], []
     for _ in range(3):
         for _, s in scenes:
             t = time.perf_counter()
             fast.fast_critical_height(s)
             one.append(time.perf_counter() - t)
-    return batch_us, 1e6 * float(np.median(one))
+            t = time.perf_counter()
+            critical_height(s, tier="fast")
+            public.append(time.perf_counter() - t)
+    return batch_us, 1e6 * float(np.median(one)), 1e6 * float(np.median(public))
 
 
 def stats(rel):
@@ -183,7 +187,7 @@ def main(argv=None):
     scenes = [(f"preset/{p}", get_preset(p)) for p in PRESETS] + scene_set("test")
     h_full, c_full, wall_full = full_heights(scenes)
     h_fast, c_fast = fast_heights(scenes)
-    batch_us, one_us = timing(scenes)
+    batch_us, one_us, public_us = timing(scenes)
     labels = np.array([lab for lab, _ in scenes])
     group = np.array([lab.split("/")[0] for lab in labels])
     both = np.array([a is None and b is None for a, b in zip(c_full, c_fast)])
@@ -237,6 +241,8 @@ def main(argv=None):
               f"over repeated calls)",
               f"- fast tier, per-scene Python entry (`fast_critical_height`, includes building "
               f"the HeightResult): median {one_us:.1f} us over the scenes",
+              f"- fast tier, public call (`critical_height(scene, tier=\"fast\")`, adds the full "
+              f"tier's validity flags): median {public_us:.1f} us over the scenes",
               f"- full model, rtol={RTOL}: median {1e3 * np.median(wall_full):.1f} ms, "
               f"max {1e3 * wall_full.max():.0f} ms per height",
               f"- script wall time: {time.perf_counter() - t_start:.0f} s", ""]
