@@ -18,8 +18,8 @@ median error-cost front, measured side by side in this run) and the Pareto figur
 
 Usage::
 
-    python benchmarks/solver.py            # all presets, ~12-25 min (the peer dominates)
-    python benchmarks/solver.py --quick    # two presets, fewer tolerances (~5 min)
+    python benchmarks/solver.py            # all presets, ~4-25 min by the machine (the peer dominates)
+    python benchmarks/solver.py --quick    # two presets, fewer tolerances
 """
 
 from __future__ import annotations
