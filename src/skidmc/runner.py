@@ -163,6 +163,14 @@ def _solve(critical_height, scene: Scene, kwargs: dict) -> tuple[float, str, int
     return h, status, evaluations, flags, ""
 
 
+def _solve_into(out: BatchResult, i: int, critical_height, scene: Scene, kwargs: dict) -> None:
+    """Solve sample i's scene and record its outcome and solver wall time [s] in `out`."""
+    t0 = time.perf_counter()
+    (out.critical_height[i], out.status[i], out.evaluations[i], out.flags[i],
+     out.failure_reason[i]) = _solve(critical_height, scene, kwargs)
+    out.wall_time[i] = time.perf_counter() - t0
+
+
 def _solver_kwargs(solver_options) -> dict:
     """SolverOptions or mapping -> plain keyword arguments (picklable without skidmc.study)."""
     if hasattr(solver_options, "as_kwargs"):  # a SolverOptions
@@ -255,10 +263,7 @@ def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None) -> BatchResult:
         values = scene.as_dict()
         for k in NUMERIC_KEYS:
             out.inputs[k][i] = values[k]
-        t0 = time.perf_counter()
-        (out.critical_height[i], out.status[i], out.evaluations[i], out.flags[i],
-         out.failure_reason[i]) = _solve(critical_height, scene, kwargs)
-        out.wall_time[i] = time.perf_counter() - t0
+        _solve_into(out, i, critical_height, scene, kwargs)
     return out
 
 
@@ -284,20 +289,15 @@ def _evaluate_columns(columns: Mapping, kwargs: dict, base: Scene | None) -> Bat
     for k in NUMERIC_KEYS:
         out.inputs[k][:] = columns.get(k, base_values[k])
     derived = [(out.inputs[k], k.replace(".", "_")) for k in scenes.derived]  # attribute names
-    height, status, evaluations = out.critical_height, out.status, out.evaluations
-    flags, failure_reason, wall_time = out.flags, out.failure_reason, out.wall_time
     for i in range(m):
         try:
             scene = scenes.scene(i)
         except Exception as exc:  # noqa: BLE001 - an invalid sample fails alone, not the run
-            failure_reason[i] = f"invalid inputs: {type(exc).__name__}: {exc}"
+            out.failure_reason[i] = f"invalid inputs: {type(exc).__name__}: {exc}"
             continue
         for values, field in derived:
             values[i] = getattr(scene, field)
-        t0 = time.perf_counter()
-        (height[i], status[i], evaluations[i], flags[i],
-         failure_reason[i]) = _solve(critical_height, scene, kwargs)
-        wall_time[i] = time.perf_counter() - t0
+        _solve_into(out, i, critical_height, scene, kwargs)
     return out
 
 

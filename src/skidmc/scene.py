@@ -159,9 +159,11 @@ def _bound_reason(key: str) -> str:
     return rule + _BOUND_NOTES.get(key, "")
 
 
-def _in_bounds(key: str, x: float) -> bool:
+def _in_bounds(key: str, x):
+    """Whether `x` (a float, or elementwise an array) lies in `key`'s allowed interval; NaN
+    does not (its comparisons are False)."""
     lo, lo_in, hi, hi_in = _BOUNDS[key]
-    return (x >= lo if lo_in else x > lo) and (x <= hi if hi_in else x < hi)
+    return (x >= lo if lo_in else x > lo) & (x <= hi if hi_in else x < hi)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -492,10 +494,7 @@ class SceneColumns:
         # "must be finite").
         ok = np.ones(self._m, dtype=bool)
         for key in self.keys:
-            x = columns[key]
-            lo, lo_in, hi, hi_in = _BOUNDS[key]
-            ok &= (x >= lo) if lo_in else (x > lo)
-            ok &= (x <= hi) if hi_in else (x < hi)
+            ok &= _in_bounds(key, columns[key])
         if "initial_temperature" in columns or "he.melting_point" in columns:
             t0 = columns.get("initial_temperature", base.initial_temperature)
             ok &= t0 < columns.get("he.melting_point", base.he_melting_point)
