@@ -237,13 +237,17 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         from skidmc.presets import get_preset
 
         base = get_preset(base)
-    in_process = scheduler in (None, "local") and (workers or _default_workers()) == 1
-    if in_process and isinstance(scenes, Mapping):
+    if scheduler in (None, "local") and (workers or _default_workers()) == 1:
+        return _evaluate_here(scenes, kwargs, base)
+    return _evaluate_rows_parallel(_rows(scenes), kwargs, base, workers, chunk_size, scheduler)
+
+
+def _evaluate_here(scenes, kwargs: dict, base: Scene | None) -> BatchResult:
+    """evaluate_batch in this process: columns through :func:`_evaluate_columns`, rows or
+    scenes through :func:`_evaluate_rows`."""
+    if isinstance(scenes, Mapping):
         return _evaluate_columns(scenes, kwargs, base)
-    rows = _rows(scenes)
-    if in_process:
-        return _evaluate_rows(rows, kwargs, base)
-    return _evaluate_rows_parallel(rows, kwargs, base, workers, chunk_size, scheduler)
+    return _evaluate_rows(_rows(scenes), kwargs, base)
 
 
 def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None) -> BatchResult:
@@ -380,8 +384,7 @@ def _peak_rss_mib() -> float:
 def _evaluate_chunk(chunk: _Chunk) -> _ChunkOut:
     """Worker entry point (module level: picklable for processes and dask)."""
     began = time.time()
-    results = [_evaluate_columns(ov, chunk.options, sc) if isinstance(ov, Mapping)
-               else _evaluate_rows(_rows(ov), chunk.options, sc)
+    results = [_evaluate_here(ov, chunk.options, sc)
                for sc, ov in zip(chunk.scenes, chunk.overrides)]
     return _ChunkOut(results, os.getpid(), _peak_rss_mib(), began, time.time())
 
