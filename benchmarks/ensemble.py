@@ -34,8 +34,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from skidmc.runner import _default_workers, execute_study
-from skidmc.study import load_study
+from skidmc.ensemble.executors import default_workers
+from skidmc.ensemble.run import execute_study
+from skidmc.ensemble.study import load_study
 
 OUT = ROOT / "results" / "benchmarks"
 
@@ -48,7 +49,7 @@ def instant(scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
     return types.SimpleNamespace(critical_height=0.4 / scene.mu, censored=None, evaluations=1,
                                  flags=(), wall_time=0.0)
 skidmc.solver.critical_height = instant
-from skidmc.runner import execute_study
+from skidmc.ensemble.run import execute_study
 report = execute_study(sys.argv[2], sys.argv[3], n=int(sys.argv[4]), workers=1, progress=False)
 print(json.dumps({"evaluated": report.evaluated, "wall": report.wall_time,
                   "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
@@ -57,7 +58,7 @@ print(json.dumps({"evaluated": report.evaluated, "wall": report.wall_time,
 
 def _warm_up() -> None:
     """Compile (or load) the solver's kernels once, outside the timed runs."""
-    from skidmc.presets import get_preset
+    from skidmc.scene import get_preset
     from skidmc.solver import critical_height
 
     critical_height(get_preset("paper-quartz"), rtol=1e-2)
@@ -236,7 +237,7 @@ def main(argv=None) -> None:
                         help="sample counts of the memory probe")
     args = parser.parse_args(argv)
     studies = sorted((ROOT / "studies").glob("*.toml"))
-    worker_counts = sorted({1, _default_workers()})
+    worker_counts = sorted({1, default_workers()})
     _warm_up()
     load = os.getloadavg()
     with tempfile.TemporaryDirectory() as tmp:

@@ -39,14 +39,13 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import peer  # noqa: E402
 
-from skidmc.presets import get_preset  # noqa: E402
+from skidmc.scene import get_preset  # noqa: E402
 from skidmc.solver import FT, critical_height  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"

@@ -1,6 +1,6 @@
 """Batch throughput: parallel scaling, first-call compile latency, worker start-up and memory.
 
-Measures, on this machine, for :func:`skidmc.runner.evaluate_batch` and its worker processes:
+Measures, on this machine, for :func:`skidmc.evaluate_batch` and its worker processes:
 
 a. Scaling: one batch of scenes (the first 200 samples of ``studies/paper-series1.toml`` in
    each of its 4 scenes: 800 scenes, at the study's rtol = 1e-2) evaluated with 1 worker (in process) and with 2 worker
@@ -29,7 +29,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import concurrent.futures as cf
 import csv
 import json
 import multiprocessing
@@ -47,7 +46,8 @@ sys.path.insert(0, str(ROOT / "src"))
 
 import numpy as np  # noqa: E402
 
-from skidmc import runner  # noqa: E402
+from skidmc.ensemble import executors  # noqa: E402
+from skidmc.ensemble.batch import evaluate_batch  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
 STUDY = ROOT / "studies" / "paper-series1.toml"
@@ -56,7 +56,7 @@ _FIRST_CALL = r"""
 import json, sys, time
 t0 = time.perf_counter()
 sys.path.insert(0, sys.argv[1])
-from skidmc.presets import get_preset
+from skidmc.scene import get_preset
 from skidmc.solver import critical_height
 t1 = time.perf_counter()
 critical_height(get_preset("paper-quartz"), rtol=1e-2, tier=sys.argv[2])
@@ -69,20 +69,20 @@ print(json.dumps({"import_s": t1 - t0, "first_call_s": t2 - t1, "second_call_s":
 _STARTUP = r"""
 import concurrent.futures as cf, json, multiprocessing, sys, time
 sys.path.insert(0, sys.argv[1])
-from skidmc import runner
+from skidmc.ensemble import executors
 if __name__ == "__main__":
     method, workers = sys.argv[2], int(sys.argv[3])
     times = []
     for _ in range(2):  # a first pool, then a second one (forkserver: the server is running)
         t = time.perf_counter()
         if method == "runner":
-            pool = runner._Processes(workers)
-            futs = [pool.submit(runner._ping, None) for _ in range(workers)]
+            pool = executors.ProcessExecutor(workers)
+            futs = [pool.submit(executors._ping, None) for _ in range(workers)]
         else:
             pool = cf.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context(method),
-                                          initializer=runner._warm_worker,
-                                          initargs=(runner._WARM_UP,))
-            futs = [pool.submit(runner._ping, None) for _ in range(workers)]
+                                          initializer=executors._warm_worker,
+                                          initargs=(executors._WARM_UP,))
+            futs = [pool.submit(executors._ping, None) for _ in range(workers)]
         pids = {f.result() for f in futs}
         times.append(time.perf_counter() - t)
         pool.shutdown()
@@ -92,9 +92,9 @@ if __name__ == "__main__":
 
 def batch_scenes(n_scenes: int):
     """The first samples of paper-series1 as `n_scenes` Scene objects, scenes interleaved."""
-    from skidmc.sampling import StudySampler
+    from skidmc.ensemble.sampling import StudySampler
     from skidmc.scene import SI_UNITS, make_scene
-    from skidmc.study import load_study
+    from skidmc.ensemble.study import load_study
 
     study = load_study(STUDY)
     per = -(-n_scenes // len(study.scenes))
@@ -124,7 +124,7 @@ def scaling(n_scenes: int, rounds: int) -> list[dict]:
 
     def timed(label: str, workers: int, rnd: int):
         t = time.perf_counter()
-        res = runner.evaluate_batch(scenes, options, workers=workers)
+        res = evaluate_batch(scenes, options, workers=workers)
         wall = time.perf_counter() - t
         solver = float(res.wall_time.sum())
         rows.append({"section": "scaling", "case": label, "workers": workers, "round": rnd,
@@ -134,14 +134,14 @@ def scaling(n_scenes: int, rounds: int) -> list[dict]:
         print(rows[-1], flush=True)
         return res
 
-    runner.shutdown_workers()
+    executors.shutdown_workers()
     reference = timed("2 workers, cold pool", 2, 0)  # pool start-up included
     for rnd in range(1, rounds + 1):
         one = timed("1 worker (in process)", 1, rnd)
         two = timed("2 workers, warm pool", 2, rnd)
         if not (_same(one, reference) and _same(two, reference)):
             raise SystemExit("results differ between worker counts")
-    runner.shutdown_workers()
+    executors.shutdown_workers()
     return rows
 
 
@@ -170,7 +170,7 @@ def startup(workers: int) -> list[dict]:
         res = subprocess.run([sys.executable, "-c", _STARTUP, str(ROOT / "src"), method,
                               str(workers)], capture_output=True, text=True, check=True)
         probe = json.loads(res.stdout.strip().splitlines()[-1])
-        name = (f"runner ({runner._mp_context().get_start_method()})" if method == "runner"
+        name = (f"runner ({executors._mp_context().get_start_method()})" if method == "runner"
                 else method)
         rows.append({"section": "startup", "case": name, "workers": workers,
                      **{k: round(v, 3) for k, v in probe.items()}})
@@ -181,20 +181,20 @@ def startup(workers: int) -> list[dict]:
 def memory(checkpoints, chunk: int = 25) -> list[dict]:
     """Evaluations in one worker process (the runner's entry point), peak RSS at checkpoints."""
     scenes, options = batch_scenes(max(checkpoints))
-    pool = runner._Processes(1)
+    pool = executors.ProcessExecutor(1)
     rows, done = [], 0
     try:
-        pid0, peak0, rss0 = pool.submit(runner._worker_probe, None).result()
+        pid0, peak0, rss0 = pool.submit(executors._worker_probe, None).result()
         rows.append({"section": "memory", "case": "worker after warm-up", "n": 0,
                      "peak_rss_mib": round(peak0, 1), "rss_mib": round(rss0, 1)})
         print(rows[-1], flush=True)
         for target in sorted(checkpoints):
             while done < target:
                 stop = min(target, done + chunk)
-                job = runner._Chunk(done, stop, (None,), [scenes[done:stop]], options)
-                pool.submit(runner._evaluate_chunk, job).result()
+                job = executors.Chunk(done, stop, (None,), [scenes[done:stop]], options)
+                pool.submit(executors.evaluate_chunk, job).result()
                 done = stop
-            pid, peak, rss = pool.submit(runner._worker_probe, None).result()
+            pid, peak, rss = pool.submit(executors._worker_probe, None).result()
             if pid != pid0:
                 raise SystemExit("the worker process changed")
             rows.append({"section": "memory", "case": "one worker", "n": done,
@@ -268,7 +268,7 @@ def write(rows: list[dict], load: tuple, load_after: tuple, args) -> None:
         "",
         "## a. Scaling: the same batch on 1 and 2 workers",
         "",
-        (f"`skidmc.runner.evaluate_batch(scenes, {{'rtol': 1e-2, ...}}, workers=w)` on "
+        (f"`skidmc.evaluate_batch(scenes, {{'rtol': 1e-2, ...}}, workers=w)` on "
          f"{sc[0]['n']} scenes (the first {sc[0]['n'] // 4} samples of paper-series1 in each "
          "of its four scenes), "
          f"alternating 1 and 2 workers over {args.rounds} round(s); 2 workers on the warm pool "
@@ -330,8 +330,8 @@ def write(rows: list[dict], load: tuple, load_after: tuple, args) -> None:
         "",
         "## d. Peak memory of one worker against the evaluations it has done",
         "",
-        ("One worker process of the runner (`_Processes(1)`, the same entry point as a study "
-         "run's chunks: `_evaluate_chunk`), fed chunks of 25 scenes of the batch above; after "
+        ("One worker process of the runner (`ProcessExecutor(1)`, the same entry point as a study "
+         "run's chunks: `evaluate_chunk`), fed chunks of 25 scenes of the batch above; after "
          "each checkpoint the worker reports its peak RSS (`resource.getrusage`, ru_maxrss) and "
          "its current RSS (/proc/self/statm). A worker holds one chunk at a time, so neither "
          "should grow with n."),

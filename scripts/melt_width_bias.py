@@ -1,10 +1,10 @@
 """Bias of the critical height from the smoothed melting step, against its width.
 
 The HE's latent heat is released over a tanh step of width w around T_m
-(``skidmc.thermal._he_enthalpy``); sharp Stefan melting is the limit w -> 0. At a fixed,
+(``skidmc.physics.thermal._he_enthalpy``); sharp Stefan melting is the limit w -> 0. At a fixed,
 fine resolution level the critical height is computed for w = 0.125 ... 4 K and compared with
 its limit w -> 0, extrapolated linearly from w = 0.25 and 0.125 K (the bias is close to first
-order in w). The bias per kelvin bounds ``skidmc.model.MELT_WIDTH_BIAS_PER_K``, which the
+order in w). The bias per kelvin bounds ``skidmc.solver.model.MELT_WIDTH_BIAS_PER_K``, which the
 solver uses to choose w from its tolerance (``skidmc.solver.melt_width_for_rtol``).
 
 Writes results/validation/melt_width_bias.{csv,md}. Run: ``python scripts/melt_width_bias.py``
@@ -17,7 +17,7 @@ import argparse
 import csv
 from pathlib import Path
 
-from skidmc.model import MELT_WIDTH_BIAS_PER_K
+from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K
 from skidmc.scene import make_scene
 from skidmc.solver import critical_height
 

@@ -13,7 +13,7 @@ worst case. The same runs give the residual error of the solver's Richardson val
 Writes results/validation/refinement.{csv,md,png}. Run: ``python scripts/refinement_study.py``.
 
 The melting step's width w is, by default, the solver's floor at each level
-(``skidmc.model.melt_width_floor``: 2 K * 2**-L, the rule the error model was calibrated
+(``skidmc.solver.model.melt_width_floor``: 2 K * 2**-L, the rule the error model was calibrated
 with). ``--melt-width W`` holds it at W kelvin at every level instead, as the solver does
 when rtol sets a wider step (``melt_width_for_rtol``); the files then get a ``_wW`` suffix.
 """
@@ -31,11 +31,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from skidmc.model import melt_width_floor, resolution_for_level  # noqa: E402
+from skidmc.solver.model import melt_width_floor, resolution_for_level  # noqa: E402
 from skidmc.scene import make_scene  # noqa: E402
-from skidmc.solver import (ERROR_LEVEL0, RICHARDSON_ERROR_LEVEL0,  # noqa: E402
-                           RICHARDSON_MIN_LEVEL, critical_height, level_for_rtol,
-                           plan_for_rtol)
+from skidmc.solver import critical_height  # noqa: E402
+from skidmc.solver.plan import (ERROR_LEVEL0, RICHARDSON_ERROR_LEVEL0,  # noqa: E402
+                                RICHARDSON_MIN_LEVEL, level_for_rtol, plan_for_rtol)
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
 LEVELS = [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0]
@@ -144,7 +144,7 @@ def main():
         + ", ".join(f"rtol {r:g} -> level {plan_for_rtol(r)[0]:g}"
                     + (" extrapolated" if plan_for_rtol(r)[1] else "")
                     for r in (1e-2, 3e-3, 1e-3, 1e-4))
-        + f" (plain levels alone: "
+        + " (plain levels alone: "
         + ", ".join(f"{level_for_rtol(r):g}" for r in (1e-2, 3e-3, 1e-3, 1e-4)) + ").",
     ]
     (OUT / f"refinement{suffix}.md").write_text("\n".join(lines) + "\n")

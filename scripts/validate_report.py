@@ -16,7 +16,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from skidmc.presets import PAPER_TABLE_VIII, PAPER_TABLE_IX  # noqa: E402
+from skidmc.scene.presets import PAPER_TABLE_VIII, PAPER_TABLE_IX  # noqa: E402
 from skidmc.scene import make_scene  # noqa: E402
 from skidmc.solver import critical_height  # noqa: E402
 

@@ -13,7 +13,7 @@ import types
 import pytest
 
 from skidmc.cli import main
-from skidmc.presets import PRESETS
+from skidmc.scene.presets import PRESETS
 from skidmc.scene import SCENE_KEYS
 
 FT = 0.3048  # m, exact
@@ -137,20 +137,8 @@ def test_usage_errors_exit_2():
     assert info.value.code == 2
 
 
-def test_run_delegates_to_the_runner(monkeypatch):
-    seen = []
-    module = types.ModuleType("skidmc.runner")
-    module.main_run = lambda args: seen.append(args) or 0
-    monkeypatch.setitem(sys.modules, "skidmc.runner", module)
-    assert main(["run", "studies/x.toml", "--n", "64", "--workers", "4", "--resume"]) == 0
-    (args,) = seen
-    assert (args.study, args.n, args.workers, args.resume, args.quiet) == (
-        "studies/x.toml", 64, 4, True, False)
-
-
 @pytest.mark.slow
 def test_height_with_the_real_solver(capsys):
-    pytest.importorskip("skidmc.solver")
     assert main(["height", "--preset", "paper-quartz", "--rtol", "1e-2", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["censored"] is None and data["critical_height_m"] > 0

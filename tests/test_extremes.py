@@ -31,8 +31,8 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from skidmc import mechanics
-from skidmc.model import build_model
+from skidmc.physics import mechanics
+from skidmc.solver.model import build_model
 from skidmc.scene import make_scene
 from skidmc.solver import critical_height, simulate
 

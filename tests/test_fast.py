@@ -1,4 +1,4 @@
-"""The fast tier (skidmc.fast): Duhamel integral, agreement with the full model, trends,
+"""The fast tier (skidmc.physics.fast kernels, skidmc.solver.fast): Duhamel integral, agreement with the full model, trends,
 censoring and robustness at the extremes of the input ranges."""
 
 import math
@@ -7,19 +7,21 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from skidmc import fast
-from skidmc.fast import (
+from skidmc.physics import fast
+from skidmc.physics.fast import (
     CENSOR_ABOVE,
     CENSOR_BELOW,
     CENSOR_NONE,
     duhamel_theta,
+    impact_mechanics,
+)
+from skidmc.solver.fast import (
     fast_critical_height,
     fast_critical_heights,
-    impact_mechanics,
     scene_columns,
     theta_history,
 )
-from skidmc.presets import get_preset
+from skidmc.scene import get_preset
 from skidmc.solver import critical_height
 
 G = 9.80665
@@ -69,7 +71,7 @@ def test_theta_eq10_flux_against_quadrature(name):
 def test_theta_scales_with_root_height():
     # The separation T_s - T0 = sqrt(H) Theta(t) that the tier rests on: Theta is a property of
     # the scene alone. Compare with the full model's own mechanics (flux per root height).
-    from skidmc.model import build_model
+    from skidmc.solver.model import build_model
 
     scene = get_preset("paper-alumina-rough")
     model = build_model(scene)
@@ -259,7 +261,7 @@ def test_meshless_model_equals_meshed_one(melting):
     # model's, bit for bit.
     import dataclasses
 
-    from skidmc.model import build_model
+    from skidmc.solver.model import build_model
 
     mesh_fields = {"width", "rho_c", "face_conductance", "n_target", "q_share_he"}
     seen = set()
@@ -284,7 +286,7 @@ def test_meshless_model_equals_meshed_one(melting):
 def test_exit_from_constants_equals_contact_and_stop_time():
     # build_model's exit (mechanics.exit_from_constants, scalar) is the array functions'
     # contact_time / stop_time, bit for bit, over the whole input range.
-    from skidmc import mechanics
+    from skidmc.physics import mechanics
 
     rng = np.random.default_rng(3)
     n = 2000

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from skidmc import mechanics as mech
-from skidmc.presets import get_preset
+from skidmc.physics import mechanics as mech
+from skidmc.scene import get_preset
 
 # First-series billet in SI (independent of the units layer: factors written out).
 PSI = 6894.757293168361  # [Pa]

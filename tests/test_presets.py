@@ -12,16 +12,14 @@ import itertools
 import pytest
 
 from skidmc.errors import SceneError
-from skidmc.presets import (
+from skidmc.scene.presets import (
     PAPER_TABLE_III,
     PAPER_TABLE_IV,
     PAPER_TABLE_IX,
     PAPER_TABLE_VIII,
     PRESETS,
-    get_preset,
-    list_presets,
 )
-from skidmc.scene import SCENE_KEYS, Scene
+from skidmc.scene import SCENE_KEYS, Scene, get_preset, list_presets
 
 INCH = 0.0254
 LB = 0.45359237

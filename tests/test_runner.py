@@ -22,13 +22,15 @@ import numpy as np
 import pytest
 import xarray as xr
 
-pytest.importorskip("skidmc.presets", reason="the study layer needs the presets (issue 2)")
 
-from skidmc import runner
-from skidmc.presets import get_preset
-from skidmc.runner import evaluate_batch, execute_study, main_run, run_study
-from skidmc.storage import StorageError, inspect_file
-from skidmc.study import SolverOptions
+from skidmc.ensemble import evaluate as evaluate_module
+from skidmc.ensemble import executors, schedule
+from skidmc.scene import get_preset
+from skidmc.cli import _cmd_run as main_run
+from skidmc.ensemble.batch import evaluate_batch
+from skidmc.ensemble.run import execute_study, run_study
+from skidmc.ensemble.storage import StorageError, inspect_file
+from skidmc.ensemble.study import SolverOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -171,8 +173,8 @@ def test_study_columns_fast_path_equals_row_by_row(fake_solver, preset):
         "initial_temperature": np.array([294.0, 600.0, 290.0, 300.0, 295.0, 296.0, 297.0, 298.0]),
         "target.conductivity": np.array([1.5, 1.6, 1.7, np.inf, 1.2, 1.3, -0.0, 1.4]),
     }
-    fast = runner._evaluate_columns(columns, {}, base)
-    general = runner._evaluate_rows(runner._rows(columns), {}, base)
+    fast = evaluate_module._evaluate_columns(columns, {}, base)
+    general = evaluate_module._evaluate_rows(evaluate_module.as_rows(columns), {}, base)
     _assert_same_batch(fast, general)
     for k in fast.inputs:  # np.array_equal takes -0.0 for 0.0: bytes do not
         assert fast.inputs[k].tobytes() == general.inputs[k].tobytes(), k
@@ -182,8 +184,8 @@ def test_study_columns_fast_path_equals_row_by_row(fake_solver, preset):
     # evaluate_batch in process takes the same path; a chunk of a study too.
     batch = evaluate_batch(columns, base=base)
     _assert_same_batch(batch, general)
-    chunk = runner._Chunk(0, 8, (base, base), [columns, runner._rows(columns)], {})
-    for res in runner._evaluate_chunk(chunk).results:
+    chunk = executors.Chunk(0, 8, (base, base), [columns, evaluate_module.as_rows(columns)], {})
+    for res in executors.evaluate_chunk(chunk).results:
         _assert_same_batch(res, general)
 
 
@@ -258,14 +260,14 @@ def test_n_override_and_mc_prefix(tmp_path, study_file, fake_solver):
 
 def test_a_sample_that_kills_its_worker_is_isolated(tmp_path, study_file, fake_solver,
                                                     monkeypatch):
-    real = runner._evaluate_chunk
+    real = executors.evaluate_chunk
 
     def crashing(chunk):
         if chunk.start <= 3 < chunk.stop:
             raise cf.process.BrokenProcessPool("worker died")
         return real(chunk)
 
-    monkeypatch.setattr(runner, "_evaluate_chunk", crashing)
+    monkeypatch.setattr(schedule, "evaluate_chunk", crashing)
     path = run_study(study_file, tmp_path / "o.h5", workers=1, chunk_size=4, progress=False)
     ds = xr.open_dataset(path)
     assert list(ds.status.values[:, 3]) == ["failed", "failed"]
@@ -378,7 +380,7 @@ def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path, study_file, re
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT / "src"),
                                                       env.get("PYTHONPATH")]))
-    cmd = [sys.executable, "-m", "skidmc.runner", str(study_file), "--out", str(out),
+    cmd = [sys.executable, "-m", "skidmc", "run", str(study_file), "--out", str(out),
            "--workers", "1", "--chunk-size", "1", "--quiet"]
     proc = subprocess.Popen(cmd, env=env, start_new_session=True, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
@@ -429,7 +431,7 @@ def test_a_crashing_worker_process_costs_only_its_sample(tmp_path, study_file):
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), str(ROOT / "src"),
                                                       env.get("PYTHONPATH")]))
     out = tmp_path / "crash.h5"
-    proc = subprocess.run([sys.executable, "-m", "skidmc.runner", str(study_file), "--out",
+    proc = subprocess.run([sys.executable, "-m", "skidmc", "run", str(study_file), "--out",
                            str(out), "--workers", "2", "--chunk-size", "4", "--quiet"],
                           env=env, capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr
@@ -452,13 +454,13 @@ def test_a_crashing_worker_process_costs_only_its_sample(tmp_path, study_file):
 def test_schedule_hands_out_every_sample_once_in_order():
     todo = np.ones(50, dtype=bool)
     todo[[3, 4, 20]] = False  # done already (a resumed run)
-    fixed = runner._Schedule(todo, 4, 2, chunk_size=7)
+    fixed = schedule.Schedule(todo, 4, 2, chunk_size=7)
     chunks = []
     while fixed:
         chunks.append(fixed.next())
     assert [i for a, b in chunks for i in range(a, b)] == list(np.flatnonzero(todo))
     assert max(b - a for a, b in chunks) == 7 and fixed.remaining == 0
-    timed = runner._Schedule(np.ones(2000, dtype=bool), 4, 2)
+    timed = schedule.Schedule(np.ones(2000, dtype=bool), 4, 2)
     sizes = []
     while timed:
         a, b = timed.next()
@@ -466,7 +468,7 @@ def test_schedule_hands_out_every_sample_once_in_order():
         timed.observe(b - a, 0.004 * (b - a))  # 4 ms a sample
     assert sum(sizes) == 2000 and sizes[0] == 2  # FIRST_CHUNK_EVALUATIONS / 4 scenes
     assert sizes[1] == 125  # TARGET_CHUNK_SECONDS of work at 4 ms a sample
-    shortest = math.ceil(runner.MIN_CHUNK_SECONDS / 0.004)  # guided: short chunks at the end
+    shortest = math.ceil(schedule.MIN_CHUNK_SECONDS / 0.004)  # guided: short chunks at the end
     assert min(sizes[1:-1]) == shortest and sizes[-1] <= shortest
     assert sizes[-10:] == sorted(sizes[-10:], reverse=True)
 
@@ -500,23 +502,23 @@ def test_evaluate_batch_on_workers_identical_ordered_isolated():
         assert np.array_equal(np.argsort(mu), np.argsort(-h))
         assert np.all(two.wall_time[ok] > 0)
         # The pool stays warm for the next call: Scene objects, automatic chunks, censoring.
-        pool = runner._POOLS[2]
+        pool = executors.POOLS[2]
         quartz = get_preset("paper-quartz")
         scenes = [quartz.replace(mu=r["mu"]) for r in _ROWS if r["mu"] > 0][::-1]
         capped = {"rtol": 1e-2, "h_max": float(np.nanmedian(one.critical_height))}
         inline = evaluate_batch(scenes, capped)
         pooled = evaluate_batch(scenes, capped, workers=2)
-        assert runner._POOLS[2] is pool
+        assert executors.POOLS[2] is pool
         _assert_same_batch(inline, pooled)
         assert "censored_above" in set(pooled.status) and "ok" in set(pooled.status)
     finally:
-        runner.shutdown_workers()
-    assert not runner._POOLS
+        executors.shutdown_workers()
+    assert not executors.POOLS
 
 
 _BATCH_SCRIPT = """
 import json, sys
-from skidmc.runner import evaluate_batch
+from skidmc.ensemble.batch import evaluate_batch
 if __name__ == "__main__":
     rows = [{"mu": m} for m in (0.10, 0.12, 0.145, 0.13, 0.16, 0.11)]
     res = evaluate_batch(rows, {"rtol": 1e-2}, base="paper-quartz", workers=2, chunk_size=2)

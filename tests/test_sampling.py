@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 import scipy.stats
 
-pytest.importorskip("skidmc.presets", reason="the study layer needs the presets (issue 2)")
 
-from skidmc.sampling import (
+from skidmc.ensemble.sampling import (
     MC_BLOCK,
     StudySampler,
     UniformDesign,
@@ -19,7 +18,7 @@ from skidmc.sampling import (
     seed_sequence,
     transform,
 )
-from skidmc.study import RATE_AT_REFERENCE, U_TAIL, parse_study
+from skidmc.ensemble.study import RATE_AT_REFERENCE, U_TAIL, parse_study
 
 STUDY = """
 [study]

@@ -28,7 +28,7 @@ from skidmc.scene import (
     Scene,
     make_scene,
 )
-from skidmc.units import from_si, to_si, ureg
+from skidmc.scene.units import from_si, to_si, ureg
 
 INCH = 0.0254  # m
 LB = 0.45359237  # kg

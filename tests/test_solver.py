@@ -5,13 +5,16 @@ import math
 import pytest
 
 from skidmc.errors import SceneError
-from skidmc.presets import PAPER_TABLE_VIII, get_preset
+from skidmc.scene import get_preset
+from skidmc.scene.presets import PAPER_TABLE_VIII
 from skidmc.scene import make_scene
-from skidmc.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
-from skidmc.solver import (CARRIED_GO_SLOPE_ERROR, DISCRETISATION_SHARE, ERROR_LEVEL0,
-                           MAX_MELT_WIDTH, MELT_SHARE, ROOT_SHARE, critical_height,
-                           extrapolated_error, level_for_rtol, melt_width_for_rtol,
-                           modelled_error, plan_for_rtol, root_tolerance)
+from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
+from skidmc.solver import critical_height
+from skidmc.solver.plan import (DISCRETISATION_SHARE, ERROR_LEVEL0, MAX_MELT_WIDTH, MELT_SHARE,
+                                ROOT_SHARE, extrapolated_error, level_for_rtol,
+                                melt_width_for_rtol, modelled_error, plan_for_rtol,
+                                root_tolerance)
+from skidmc.solver.roots import CARRIED_GO_SLOPE_ERROR
 
 FT = 0.3048
 
@@ -230,7 +233,7 @@ def _kinked_margin(root, go_slope=-1.3, bend=0.2, nogo_slope=-0.9):
 @pytest.mark.parametrize("guess_offset", [-0.08, -0.02, 0.0, 0.01, 0.05])
 @pytest.mark.parametrize("slope", [None, -1.25])
 def test_go_side_root_lands_within_tolerance_from_either_side(guess_offset, slope):
-    from skidmc.solver import _go_side_root
+    from skidmc.solver.roots import go_side_root as _go_side_root
 
     root, x_tol = 0.3, 1.2e-4
     margin, calls = _kinked_margin(root)
@@ -242,7 +245,7 @@ def test_go_side_root_lands_within_tolerance_from_either_side(guess_offset, slop
 
 
 def test_go_side_root_from_a_close_guess_takes_two_simulations():
-    from skidmc.solver import _go_side_root
+    from skidmc.solver.roots import go_side_root as _go_side_root
 
     # A coarse level's root 0.4 % low with its go-side slope: what a Richardson pair's fine
     # search sees. The first point lands 0.2 % above the root, the second within 4 x_tol.
@@ -255,7 +258,7 @@ def test_go_side_root_from_a_close_guess_takes_two_simulations():
 
 @pytest.mark.parametrize("slope_error", [-CARRIED_GO_SLOPE_ERROR, 0.0, CARRIED_GO_SLOPE_ERROR])
 def test_go_side_root_accepts_one_go_point_along_a_carried_slope(slope_error):
-    from skidmc.solver import _go_side_root
+    from skidmc.solver.roots import go_side_root as _go_side_root
 
     # A coarse level's slope off by up to its bound, the first point 0.1 % above the root:
     # the extrapolation error (<= 0.15 * 1e-3) is below x_tol / 2, so one simulation does.
@@ -272,7 +275,7 @@ def test_go_side_root_accepts_one_go_point_along_a_carried_slope(slope_error):
 
 
 def test_go_side_root_gives_up_on_a_margin_that_is_not_monotone():
-    from skidmc.solver import _go_side_root
+    from skidmc.solver.roots import go_side_root as _go_side_root
 
     # Positive everywhere but the search's own first point: no root near the guess.
     assert _go_side_root(lambda x: 1.0 + 0.0 * x, 0.0, None, 1e-4, -10.0, 10.0,
@@ -284,7 +287,7 @@ def test_go_side_search_agrees_with_bisection_on_the_same_mesh(name):
     # Same model (level 0.5), two root finders: they must agree within their tolerances
     # (x_tol = 0.2 rtol on ln H each; bisection ends inside a bracket of x_tol). From the fast
     # tier's guess (0.1-0.3 % off on these presets) the go-side search needs 2-3 simulations.
-    from skidmc.model import build_model
+    from skidmc.solver.model import build_model
 
     scene = get_preset(name)
     model = build_model(scene, level=0.5)

@@ -12,9 +12,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-pytest.importorskip("skidmc.presets", reason="the study layer needs the presets (issue 2)")
 
-from skidmc.storage import (
+from skidmc.ensemble.storage import (
     FORMAT,
     EnsembleFile,
     StorageError,
@@ -22,7 +21,7 @@ from skidmc.storage import (
     ensemble_variables,
     inspect_file,
 )
-from skidmc.study import parse_study
+from skidmc.ensemble.study import parse_study
 
 TEXT = """
 [study]

@@ -23,11 +23,10 @@ import numpy as np
 import pytest
 import scipy.stats
 
-pytest.importorskip("skidmc.presets", reason="the study layer needs the presets (issue 2)")
 
 from skidmc import errors
-from skidmc.presets import get_preset
-from skidmc.study import (
+from skidmc.scene import get_preset
+from skidmc.ensemble.study import (
     RATE_AT_REFERENCE,
     StudyError,
     load_study,

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from skidmc.model import build_model, geometric_widths
-from skidmc.presets import get_preset
+from skidmc.solver.model import build_model, geometric_widths
+from skidmc.scene import get_preset
 from skidmc.solver import simulate
 
 

@@ -83,7 +83,7 @@ def _scene_inputs(scene) -> dict[str, dict]:
 
 
 def _cmd_presets(args: argparse.Namespace) -> int:
-    from skidmc.presets import PRESETS, get_preset
+    from skidmc.scene import PRESETS, get_preset
     from skidmc.scene import SI_UNITS
 
     names = [args.name] if args.name else list(PRESETS)
@@ -120,7 +120,7 @@ def _cmd_presets(args: argparse.Namespace) -> int:
 
 def _cmd_height(args: argparse.Namespace) -> int:
     from skidmc.scene import make_scene
-    from skidmc.units import from_si, to_si
+    from skidmc.scene.units import from_si, to_si
 
     overrides = _parse_sets(args.set)
     scene = make_scene(overrides, preset=args.preset)
@@ -185,9 +185,9 @@ def _cmd_height(args: argparse.Namespace) -> int:
     return 0
 
 
-# --- skidmc run (ensemble runner; owned by the sampling/runner engineer) -------------------------
-# The options are registered here; the work is done by skidmc.runner.main_run(args), imported only
-# when the subcommand is used so that `skidmc presets` and `skidmc height` do not load the runner.
+# --- skidmc run ---------------------------------------------------------------------------------
+# The ensemble layer is imported only when the subcommand runs, so that `skidmc presets` and
+# `skidmc height` do not load it.
 
 
 def _add_run_parser(subparsers) -> None:
@@ -196,25 +196,47 @@ def _add_run_parser(subparsers) -> None:
         description="Run the study described in STUDY.toml and store its results.",
     )
     run.add_argument("study", help="study file (TOML)")
-    run.add_argument("--out", help="output file or folder (default: from the study file)")
-    run.add_argument("--n", type=int, help="number of samples (default: from the study file)")
-    run.add_argument("--workers", type=int, help="number of worker processes")
-    run.add_argument("--scheduler", help="where to run: local processes or a dask scheduler")
-    run.add_argument("--resume", action="store_true", help="continue an interrupted run")
-    run.add_argument("--quiet", action="store_true", help="no progress output")
+    run.add_argument("--out", help="result file (.h5) or folder (default: "
+                     "results/<study name>/ensemble.h5)")
+    run.add_argument("--n", type=int, help="samples per scene (default: the study's)")
+    run.add_argument("--workers", type=int, help="parallel workers (default: all CPUs)")
+    run.add_argument("--scheduler", help="'local' (processes, default), 'dask' (a local dask "
+                     "cluster of --workers) or a dask scheduler address")
+    run.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    run.add_argument("--chunk-size", type=int, help=argparse.SUPPRESS)
     run.set_defaults(func=_cmd_run)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    """``skidmc run``: exit status 0 done, 2 invalid study or result file, 130 interrupted."""
+    from skidmc.ensemble.run import execute_study
+
+    parts = ["skidmc run", str(args.study)]
+    for name in ("out", "n", "workers", "scheduler"):
+        if getattr(args, name, None) is not None:
+            parts.append(f"--{name} {getattr(args, name)}")
+    parts += ["--resume"] * bool(args.resume)
     try:
-        from skidmc.runner import main_run
-    except ModuleNotFoundError as exc:
-        if exc.name != "skidmc.runner":
-            raise
-        print("skidmc: error: the ensemble runner (skidmc.runner) is not installed",
+        report = execute_study(
+            args.study, args.out, n=args.n, workers=args.workers, scheduler=args.scheduler,
+            resume=args.resume, progress=False if args.quiet else None,
+            chunk_size=getattr(args, "chunk_size", None), command=" ".join(parts))
+    except SkidmcError as exc:  # StudyError, StorageError: a message, not a traceback
+        print(f"skidmc run: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("skidmc run: interrupted; finished chunks are saved, continue with --resume",
               file=sys.stderr)
-        return 1
-    return int(main_run(args) or 0)
+        return 130
+    if not args.quiet:
+        print(f"{report.path}: {report.summary()}", file=sys.stderr)
+        failed = report.status_counts.get("failed", 0)
+        if failed:
+            print(f"skidmc run: {failed} samples failed; see failure_reason in the file",
+                  file=sys.stderr)
+    print(report.path)
+    return 0
 
 
 # --- parser and entry point ----------------------------------------------------------------------

@@ -3,7 +3,7 @@
 A scene is the 19 flat keys of ``docs/architecture.md`` held as SI floats (angles in degrees)
 plus the configuration string, in a frozen :class:`Scene`. Build one with :func:`make_scene`,
 which starts from a preset or from nothing, applies overrides given as SI floats or unit strings
-(``"28000 psi"``), converts them (:func:`skidmc.units.to_si`) and validates them. Every rejected
+(``"28000 psi"``), converts them (:func:`skidmc.scene.units.to_si`) and validates them. Every rejected
 input raises :class:`skidmc.errors.SceneError` naming the key and the value as given.
 
 The billet tilt psi follows the configuration unless it is given explicitly (report Sec. II.C and
@@ -21,7 +21,10 @@ from collections.abc import Mapping
 import numpy as np
 
 from skidmc.errors import MissingKeyError, SceneError, UnknownKeyError
-from skidmc.units import to_si
+from skidmc.scene.keys import (_BOUNDS, _PARTNER, CONFIGURATIONS, DESCRIPTIONS, NUMERIC_KEYS,
+                               SCENE_KEYS, SI_UNITS, bound_reason, in_bounds)
+from skidmc.scene.presets import PRESETS
+from skidmc.scene.units import to_si
 
 __all__ = [
     "CONFIGURATIONS",
@@ -31,85 +34,10 @@ __all__ = [
     "SI_UNITS",
     "Scene",
     "SceneColumns",
+    "get_preset",
+    "list_presets",
     "make_scene",
 ]
-
-#: The scene vocabulary, in the order of docs/architecture.md.
-SCENE_KEYS: tuple[str, ...] = (
-    "mu",
-    "flow_stress",
-    "billet_mass",
-    "billet_diameter",
-    "configuration",
-    "angle",
-    "tilt",
-    "initial_temperature",
-    "he.density",
-    "he.heat_capacity",
-    "he.conductivity",
-    "he.heat_of_fusion",
-    "he.melting_point",
-    "kinetics.prefactor",
-    "kinetics.activation_temperature",
-    "kinetics.heat_of_reaction",
-    "target.density",
-    "target.heat_capacity",
-    "target.conductivity",
-)
-
-#: Keys holding a float; every key but ``configuration``.
-NUMERIC_KEYS: tuple[str, ...] = tuple(k for k in SCENE_KEYS if k != "configuration")
-
-#: Unit of each key inside skidmc (SI, angles in degrees), as pint spells it; also the ``units``
-#: attribute written to storage.
-SI_UNITS: dict[str, str] = {
-    "mu": "1",
-    "flow_stress": "Pa",
-    "billet_mass": "kg",
-    "billet_diameter": "m",
-    "configuration": "-",
-    "angle": "deg",
-    "tilt": "deg",
-    "initial_temperature": "K",
-    "he.density": "kg/m^3",
-    "he.heat_capacity": "J/(kg K)",
-    "he.conductivity": "W/(m K)",
-    "he.heat_of_fusion": "J/kg",
-    "he.melting_point": "K",
-    "kinetics.prefactor": "1/s",
-    "kinetics.activation_temperature": "K",
-    "kinetics.heat_of_reaction": "J/kg",
-    "target.density": "kg/m^3",
-    "target.heat_capacity": "J/(kg K)",
-    "target.conductivity": "W/(m K)",
-}
-
-#: Long name of each key with the report's symbol (storage ``long_name`` attribute).
-DESCRIPTIONS: dict[str, str] = {
-    "mu": "apparent coefficient of sliding friction mu, Eq. (1)",
-    "flow_stress": "plastic flow stress of the billet sigma, Eq. (5)",
-    "billet_mass": "billet mass W",
-    "billet_diameter": "billet (hemisphere) diameter D",
-    "configuration": "drop configuration (pendulum or vertical)",
-    "angle": "impact angle phi: complement of the approach angle (pendulum) or target angle "
-    "(vertical)",
-    "tilt": "billet tilt psi from the target plane (0 for pendulum; phi for vertical)",
-    "initial_temperature": "initial temperature of billet and target T0",
-    "he.density": "HE density rho_1",
-    "he.heat_capacity": "HE specific heat c_1",
-    "he.conductivity": "HE thermal conductivity k_1",
-    "he.heat_of_fusion": "HE latent heat of melting (0 disables melting)",
-    "he.melting_point": "HE melting temperature",
-    "kinetics.prefactor": "Arrhenius frequency factor Z",
-    "kinetics.activation_temperature": "Arrhenius activation temperature E/R",
-    "kinetics.heat_of_reaction": "heat of reaction per unit mass Q = Delta H / M.W.",
-    "target.density": "target density rho_2",
-    "target.heat_capacity": "target specific heat c_2",
-    "target.conductivity": "target thermal conductivity k_2",
-}
-
-#: Valid values of ``configuration``.
-CONFIGURATIONS: tuple[str, ...] = ("pendulum", "vertical")
 
 # Attribute name of each key (dots -> underscores) and back; attribute names are also accepted as
 # keys in overrides, so that ``scene.replace(he_density=1900.0)`` works.
@@ -118,53 +46,6 @@ _KEY_OF_NAME: dict[str, str] = {
     **{field: key for key, field in _FIELD_OF_KEY.items()},
     **{key: key for key in SCENE_KEYS},
 }
-
-_INF = math.inf
-# Allowed interval per numeric key: (low, low included, high, high included), in SI_UNITS.
-_BOUNDS: dict[str, tuple[float, bool, float, bool]] = {
-    "mu": (0.0, True, 5.0, False),
-    "flow_stress": (0.0, False, _INF, False),
-    "billet_mass": (0.0, False, _INF, False),
-    "billet_diameter": (0.0, False, _INF, False),
-    "angle": (0.0, False, 90.0, False),
-    "tilt": (0.0, True, 90.0, False),
-    "initial_temperature": (0.0, False, _INF, False),
-    "he.density": (0.0, False, _INF, False),
-    "he.heat_capacity": (0.0, False, _INF, False),
-    "he.conductivity": (0.0, False, _INF, False),
-    "he.heat_of_fusion": (0.0, True, _INF, False),
-    "he.melting_point": (0.0, False, _INF, False),
-    "kinetics.prefactor": (0.0, False, _INF, False),
-    "kinetics.activation_temperature": (0.0, False, _INF, False),
-    "kinetics.heat_of_reaction": (0.0, True, _INF, False),
-    "target.density": (0.0, False, _INF, False),
-    "target.heat_capacity": (0.0, False, _INF, False),
-    "target.conductivity": (0.0, False, _INF, False),
-}
-# Checks between two keys are raised on the first; make_scene names the second if only it was given.
-_PARTNER: dict[str, str] = {"initial_temperature": "he.melting_point"}
-_BOUND_NOTES: dict[str, str] = {
-    "mu": " (a friction coefficient of 5 or more is surely a typo)",
-}
-
-
-def _bound_reason(key: str) -> str:
-    lo, lo_in, hi, hi_in = _BOUNDS[key]
-    unit = SI_UNITS[key]
-    unit = f" {unit}" if unit not in ("1", "-") else ""
-    if hi == _INF:
-        rule = f"must be {'>=' if lo_in else '>'} {lo:g}{unit}"
-    else:
-        rule = f"must be in {'[' if lo_in else '('}{lo:g}, {hi:g}{']' if hi_in else ')'}{unit}"
-    return rule + _BOUND_NOTES.get(key, "")
-
-
-def _in_bounds(key: str, x):
-    """Whether `x` (a float, or elementwise an array) lies in `key`'s allowed interval; NaN
-    does not (its comparisons are False)."""
-    lo, lo_in, hi, hi_in = _BOUNDS[key]
-    return (x >= lo if lo_in else x > lo) & (x <= hi if hi_in else x < hi)
-
 
 @dataclasses.dataclass(frozen=True)
 class Scene:
@@ -245,8 +126,8 @@ class Scene:
             x = float(value)
             if not math.isfinite(x):
                 raise SceneError(key, value, "must be finite")
-            if not _in_bounds(key, x):
-                raise SceneError(key, value, _bound_reason(key))
+            if not in_bounds(key, x):
+                raise SceneError(key, value, bound_reason(key))
             object.__setattr__(self, field, x)
         if self.configuration not in CONFIGURATIONS:
             raise SceneError(
@@ -328,8 +209,6 @@ def _base_values(preset: str | Scene | None) -> dict:
     if isinstance(preset, Scene):
         return preset.as_dict()
     if isinstance(preset, str):
-        from skidmc.presets import get_preset  # presets build on this module
-
         return get_preset(preset).as_dict()
     raise SceneError("preset", preset, "expected a preset name or a Scene")
 
@@ -352,9 +231,9 @@ def make_scene(
     mapping : mapping, optional
         Overrides with dotted keys (``{"he.density": "1.91 g/cm^3"}``) or nested dicts as read
         from TOML (``{"he": {"density": ...}}``). Attribute names (``he_density``) are accepted too.
-        Values are SI floats or strings with units (:func:`skidmc.units.to_si`).
+        Values are SI floats or strings with units (:func:`skidmc.scene.units.to_si`).
     preset : str or Scene, optional
-        Name of a preset (:mod:`skidmc.presets`) or a scene to start from. Without one, every key
+        Name of a preset (:mod:`skidmc.scene.presets`) or a scene to start from. Without one, every key
         of :data:`SCENE_KEYS` must be given (``tilt`` may be left to its default).
     **overrides
         More overrides, applied after `mapping` (a key in both takes this value).
@@ -494,7 +373,7 @@ class SceneColumns:
         # "must be finite").
         ok = np.ones(self._m, dtype=bool)
         for key in self.keys:
-            ok &= _in_bounds(key, columns[key])
+            ok &= in_bounds(key, columns[key])
         if "initial_temperature" in columns or "he.melting_point" in columns:
             t0 = columns.get("initial_temperature", base.initial_temperature)
             ok &= t0 < columns.get("he.melting_point", base.he_melting_point)
@@ -539,3 +418,31 @@ class SceneColumns:
         scene = object.__new__(Scene)
         scene.__dict__.update(fields)
         return scene
+
+
+def list_presets() -> list[str]:
+    """Names of the presets, in the order of :data:`PRESETS`."""
+    return list(PRESETS)
+
+
+def get_preset(name: str) -> Scene:
+    """The validated scene of a preset.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`PRESETS`.
+
+    Returns
+    -------
+    Scene
+        The preset's values converted to SI.
+
+    Raises
+    ------
+    SceneError
+        Unknown name (the message lists the presets).
+    """
+    if not isinstance(name, str) or name not in PRESETS:
+        raise SceneError("preset", name, "unknown preset; presets: " + ", ".join(PRESETS))
+    return make_scene(PRESETS[name]["values"])

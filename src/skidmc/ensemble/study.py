@@ -76,7 +76,7 @@ import scipy.stats
 
 from skidmc.errors import SceneError, SkidmcError
 from skidmc.scene import SCENE_KEYS, SI_UNITS, Scene, make_scene
-from skidmc.units import to_si
+from skidmc.scene.units import to_si
 
 try:
     import tomllib
@@ -98,7 +98,7 @@ __all__ = [
     "parse_study",
 ]
 
-#: Design methods (:mod:`skidmc.sampling`).
+#: Design methods (:mod:`skidmc.ensemble.sampling`).
 DESIGN_METHODS: tuple[str, ...] = ("mc", "lhs", "sobol", "saltelli")
 
 #: Pseudo-key sampled instead of ``kinetics.prefactor``: the Arrhenius rate at a reference
@@ -257,7 +257,7 @@ class Correlation:
 
 @dataclasses.dataclass(frozen=True)
 class DesignSpec:
-    """How the samples are drawn (:mod:`skidmc.sampling`).
+    """How the samples are drawn (:mod:`skidmc.ensemble.sampling`).
 
     Attributes
     ----------

@@ -193,7 +193,7 @@ def exit_time(mu, angle, tilt, flow_stress, billet_mass, billet_diameter):
 def exit_from_constants(omega, coefficient, angle):
     """:func:`exit_time` from the impact's omega [rad/s] and C of Eq. (10) [1] (scalars).
 
-    For callers that already hold omega and C (:func:`skidmc.model.build_model`): the same
+    For callers that already hold omega and C (:func:`skidmc.solver.model.build_model`): the same
     t_c and t_s as :func:`contact_time` and :func:`stop_time`, bit for bit, without
     recomputing them or paying for the array machinery of :func:`stop_time` (most of the
     cost of a mesh-less model, which the fast tier builds for every scene).

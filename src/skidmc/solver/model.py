@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from skidmc import mechanics
-from skidmc.thermal import runaway_temperature
+from skidmc.physics import mechanics
+from skidmc.physics.thermal import runaway_temperature
 
 #: Integration horizon, in exit times. Beyond the exit the flux is extended (see
 #: :attr:`SkidModel.extension_flux_factor`) only to give the critical-height search
@@ -96,7 +96,7 @@ class Resolution:
     tol_temperature : float
         Local error tolerance of the BDF2 step controller [K].
     melt_width : float
-        Width w [K] of the smoothed melting step (see skidmc.thermal._he_enthalpy).
+        Width w [K] of the smoothed melting step (see skidmc.physics.thermal._he_enthalpy).
     """
 
     cells_per_medium: int
@@ -287,7 +287,7 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         Model melting of the HE (enthalpy plateau at T_m) when the scene has a
         heat of fusion.
     runaway_fraction : float
-        Runaway rule, see :mod:`skidmc.thermal` (0 disables it).
+        Runaway rule, see :mod:`skidmc.physics.thermal` (0 disables it).
     horizon : float
         Integration horizon in exit times.
     meshes : bool

@@ -7,7 +7,7 @@ below are the report's.
 
 Each entry of :data:`PRESETS` is ``{"source": str, "notes": str, "values": {key: str}}`` with
 the values as unit strings (``"28000 psi"``), so that ``skidmc presets`` shows what the report
-printed; :func:`get_preset` converts and validates them into a :class:`~skidmc.scene.Scene`.
+printed; :func:`skidmc.scene.get_preset` converts and validates them into a :class:`~skidmc.scene.Scene`.
 
 Notes on the report's units: its "cal" is the thermochemical calorie (4.184 J, pint's ``cal``);
 "cal/g-°C" and "cal/sec-cm-°C" are per kelvin. The nomenclature lists k in cal/sec-cm-°R, but
@@ -19,8 +19,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from skidmc.errors import SceneError
-from skidmc.scene import Scene, make_scene
 
 __all__ = [
     "PAPER_TABLE_III",
@@ -30,8 +28,6 @@ __all__ = [
     "PRESETS",
     "PaperDrop",
     "PaperHeight",
-    "get_preset",
-    "list_presets",
 ]
 
 # --- building blocks ------------------------------------------------------------------------
@@ -188,34 +184,6 @@ PRESETS: dict[str, dict] = {
         },
     },
 }
-
-
-def list_presets() -> list[str]:
-    """Names of the presets, in the order of :data:`PRESETS`."""
-    return list(PRESETS)
-
-
-def get_preset(name: str) -> Scene:
-    """The validated scene of a preset.
-
-    Parameters
-    ----------
-    name : str
-        A key of :data:`PRESETS`.
-
-    Returns
-    -------
-    Scene
-        The preset's values converted to SI.
-
-    Raises
-    ------
-    SceneError
-        Unknown name (the message lists the presets).
-    """
-    if not isinstance(name, str) or name not in PRESETS:
-        raise SceneError("preset", name, "unknown preset; presets: " + ", ".join(PRESETS))
-    return make_scene(PRESETS[name]["values"])
 
 
 # --- published results -------------------------------------------------------------------------

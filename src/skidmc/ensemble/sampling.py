@@ -13,7 +13,7 @@ Reproducibility is by construction: every random stream comes from one
   larger n are the same.
 * ``saltelli``: SALib's Saltelli/Sobol' design (:func:`SALib.sample.sobol.sample`, scrambled),
   N (2d + 2) rows (or N (d + 2) without second order), drawn once up front, with the column
-  order of :attr:`skidmc.study.Study.keys` (the ``problem`` of :func:`salib_problem`).
+  order of :attr:`skidmc.ensemble.study.Study.keys` (the ``problem`` of :func:`salib_problem`).
 
 A design row u in [0, 1)^d becomes inputs in three steps (:func:`transform`): the Gaussian
 copula of the study's correlations (normal scores z = Phi^-1(u) mixed by the Cholesky factor of
@@ -32,7 +32,7 @@ import numpy as np
 from scipy.special import ndtr, ndtri
 from scipy.stats import qmc
 
-from skidmc.study import RATE_AT_REFERENCE, U_TAIL, Study
+from skidmc.ensemble.study import RATE_AT_REFERENCE, U_TAIL, Study
 
 __all__ = [
     "MC_BLOCK",
@@ -229,7 +229,7 @@ def transform(study: Study, u: np.ndarray) -> list[dict[str, np.ndarray]]:
     -------
     list of dict
         One dict per scene (``study.scenes`` order): key -> values, shape (m,), in SI units, for
-        every uncertain key of the scene; with :data:`~skidmc.study.RATE_AT_REFERENCE` also the
+        every uncertain key of the scene; with :data:`~skidmc.ensemble.study.RATE_AT_REFERENCE` also the
         derived ``kinetics.prefactor`` [1/s].
     """
     u = np.atleast_2d(np.asarray(u, dtype=float))

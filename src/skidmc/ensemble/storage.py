@@ -35,7 +35,7 @@ import numpy as np
 
 from skidmc.errors import SkidmcError
 from skidmc.scene import DESCRIPTIONS, NUMERIC_KEYS, SI_UNITS
-from skidmc.study import EXTRA_KEYS, RATE_AT_REFERENCE, Study
+from skidmc.ensemble.study import EXTRA_KEYS, RATE_AT_REFERENCE, Study
 
 __all__ = [
     "FORMAT",

@@ -1,6 +1,6 @@
 """Fast tier: a reduced (asymptotic) model of the critical drop height, 10-20 us per scene.
 
-The full model (:mod:`skidmc.thermal`, :mod:`skidmc.solver`) integrates the reactive heat
+The full model (:mod:`skidmc.physics.thermal`, :mod:`skidmc.solver`) integrates the reactive heat
 equation in both media for every trial height. The fast tier replaces it by closed-form
 mechanics, one inert Duhamel integral per scene and a scalar ignition criterion, all in compiled
 (numba) kernels of SI floats. It is meant for very large ensembles; its error against the full
@@ -9,7 +9,7 @@ reported in :attr:`HeightResult.error_estimate`.
 
 Model (report equation numbers in parentheses)
 ----------------------------------------------
-1. Mechanics, exactly as the full model (Eqs. 2-10, :mod:`skidmc.mechanics`): omega =
+1. Mechanics, exactly as the full model (Eqs. 2-10, :mod:`skidmc.physics.mechanics`): omega =
    sqrt(pi sigma D / W), t_c = pi / (2 omega), C of Eq. (10), stop time t_s; heating ends at
    t_exit = min(t_c, t_s), independent of H.
 2. Frictional flux (Eqs. 1, 10): q(t) = mu sigma V0 (s - c (1 - cos omega t)), V0 = sqrt(2 g H),
@@ -38,7 +38,7 @@ Model (report equation numbers in parentheses)
    the inert (un-melted) profile sets the melt depth (it overestimates s; lambda_melt absorbs
    this), the melt front is treated as at the interface, and the constant-flux similarity is
    used at each time with the local r. Melting is modelled only when the full model would
-   (heat of fusion > 0 and T_m below the runaway temperature, :func:`skidmc.model.build_model`).
+   (heat of fusion > 0 and T_m below the runaway temperature, :func:`skidmc.solver.model.build_model`).
 4. Ignition criterion: the adiabatic (Frank-Kamenetskii) induction integral of the surface
    history,
 
@@ -81,17 +81,15 @@ Units: SI throughout, temperatures in K, angles in degrees at the public interfa
 from __future__ import annotations
 
 import math
-import operator
 
 import numpy as np
 from numba import njit
 from scipy.special import erfc
 
-from skidmc.errors import SceneError
 
 #: Standard gravity [m/s^2] (same as :data:`skidmc.mechanics.STANDARD_GRAVITY`).
 _G = 9.80665
-#: I_cg / (W D^2) of a solid hemisphere [1] (83/320 R^2), as in :mod:`skidmc.mechanics`.
+#: I_cg / (W D^2) of a solid hemisphere [1] (83/320 R^2), as in :mod:`skidmc.physics.mechanics`.
 _INERTIA = 83.0 / 1280.0
 #: Centre-of-gravity offset per radius [1].
 _CG = 0.375
@@ -111,7 +109,7 @@ MELT_FACTOR = 0.49
 #: median 1.3 %, p90 4.6 %, max 9.6 %; on the shipped studies' samples alone p90 <= 3.8 %).
 ERROR_ESTIMATE = 0.05
 
-#: Runaway rule of the full model (skidmc.model.DEFAULT_RUNAWAY_FRACTION), used only to decide,
+#: Runaway rule of the full model (skidmc.solver.model.DEFAULT_RUNAWAY_FRACTION), used only to decide,
 #: as the full model does, whether melting is modelled.
 _RUNAWAY_FRACTION = 1e-5
 
@@ -499,151 +497,3 @@ def fast_heights_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, ti
         out_censor[i] = cens
         out_exit_time[i] = te
         out_exit_code[i] = ec
-
-
-# --- public interface ---------------------------------------------------------------------------
-
-#: Scene attributes in the kernels' argument order.
-SCENE_FIELDS = (
-    "mu", "flow_stress", "billet_mass", "billet_diameter", "angle", "tilt",
-    "initial_temperature", "he_density", "he_heat_capacity", "he_conductivity",
-    "he_heat_of_fusion", "he_melting_point", "kinetics_prefactor",
-    "kinetics_activation_temperature", "kinetics_heat_of_reaction", "target_density",
-    "target_heat_capacity", "target_conductivity",
-)
-
-#: The scene's values in the kernels' argument order (a Scene stores validated floats).
-_scene_values = operator.attrgetter(*SCENE_FIELDS)
-
-_CENSOR_NAMES = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
-_EXIT_NAMES = {EXIT_REBOUND: "rebound", EXIT_STOPS_SLIDING: "stops_sliding"}
-
-
-def theta_history(scene, n_times=N_TIMES):
-    """Inert interface temperature rise per root height of a scene (for checks and figures).
-
-    Parameters
-    ----------
-    scene : skidmc.scene.Scene
-    n_times : int
-        Number of uniform times in (0, t_exit].
-
-    Returns
-    -------
-    times : ndarray
-        [s].
-    theta : ndarray
-        Theta(t) [K/m^0.5]: T_s - T0 = sqrt(H) Theta(t) for an inert HE.
-    """
-    omega, t_exit, _, s, c = impact_mechanics(scene.mu, scene.flow_stress, scene.billet_mass,
-                                              scene.billet_diameter, scene.angle, scene.tilt)
-    e1 = math.sqrt(scene.he_conductivity * scene.he_density * scene.he_heat_capacity)
-    e2 = math.sqrt(scene.target_conductivity * scene.target_density
-                   * scene.target_heat_capacity)
-    times = t_exit * np.arange(1, n_times + 1) / n_times
-    theta = np.empty(n_times)
-    duhamel_theta(scene.mu * scene.flow_stress * math.sqrt(2.0 * _G), s, c, omega, t_exit,
-                  e1 + e2, times, _GL_X01, _GL_W01, theta)
-    return times, theta
-
-
-def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,
-                         melt_factor=MELT_FACTOR):
-    """Critical drop height of a scene by the fast (reduced) tier [m].
-
-    Parameters
-    ----------
-    scene : skidmc.scene.Scene
-    h_min, h_max : float
-        Search bounds [m]; no event at ``h_max`` is censored "above", an event at ``h_min``
-        "below".
-    melting : bool
-        Account for melting of the HE (as the full model's switch).
-    c_ign, melt_factor : float
-        The fitted constants (defaults :data:`C_IGNITION`, :data:`MELT_FACTOR`), exposed for the
-        fit in ``scripts/fast_tier_error.py``.
-
-    Returns
-    -------
-    skidmc.solver.HeightResult
-        ``evaluations=0`` (no PDE run), ``method="fast"``, ``error_estimate`` =
-        :data:`ERROR_ESTIMATE` (measured, see module docstring).
-    """
-    from skidmc.solver import HeightResult  # not at the top: skidmc.solver imports this module
-
-    if not (0.0 < h_min < h_max):
-        raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
-    args = list(_scene_values(scene))
-    if not melting:
-        args[10] = 0.0
-    h, cens, t_exit, ecode, melts = fast_height_kernel(
-        *args, float(h_min), float(h_max), float(c_ign), float(melt_factor), MELT_TABLE,
-        _GL_X01, _GL_W01, N_TIMES)
-    terms, flags = _terms_and_flags(scene, ecode, melts)
-    censored = _CENSOR_NAMES[int(cens)]
-    height = {"above": h_max, "below": h_min}.get(censored, float(h))
-    return HeightResult(critical_height=height, censored=censored, evaluations=0,
-                        flags=flags, error_estimate=ERROR_ESTIMATE, rtol=ERROR_ESTIMATE,
-                        level=0.0, method="fast", exit_time=float(t_exit),
-                        exit_kind=_EXIT_NAMES[int(ecode)], terms=terms)
-
-
-def _terms_and_flags(scene, exit_code, melts):
-    """Terms and flags as :func:`skidmc.model.build_model` infers them (without its meshes)."""
-    terms = ["frictional_heating", "friction_spin"]
-    flags = []
-    if scene.tilt > 0.0:
-        terms.append("normal_force_spin")
-    if exit_code == EXIT_STOPS_SLIDING:
-        flags.append("stops_sliding")
-    if scene.mu == 0.0:
-        terms = []
-        flags.append("no_friction")
-    elif melts:
-        terms.append("melting")
-    return tuple(terms), tuple(flags)
-
-
-def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,
-                          melt_factor=MELT_FACTOR, **columns):
-    """Critical heights of many scenes in one compiled call [m].
-
-    Parameters
-    ----------
-    h_min, h_max : float
-        Search bounds [m].
-    melting : bool
-        Account for melting.
-    c_ign, melt_factor : float
-        Fitted constants.
-    **columns : array_like
-        One 1-D array (or scalar, broadcast) per name of :data:`SCENE_FIELDS` (Scene attribute
-        names, SI units, angles in degrees). All are required.
-
-    Returns
-    -------
-    dict
-        ``critical_height`` [m] (the bound for censored rows), ``censored`` (int codes
-        :data:`CENSOR_NONE`/``ABOVE``/``BELOW``), ``exit_time`` [s], ``exit_code``.
-    """
-    missing = [f for f in SCENE_FIELDS if f not in columns]
-    if missing:
-        raise TypeError(f"missing columns: {missing}")
-    arrays = np.broadcast_arrays(*[np.asarray(columns[f], dtype=float) for f in SCENE_FIELDS])
-    arrays = [np.ascontiguousarray(np.atleast_1d(a), dtype=float) for a in arrays]
-    if not melting:
-        arrays[10] = np.zeros_like(arrays[10])
-    n = arrays[0].shape[0]
-    out_h = np.empty(n)
-    out_c = np.empty(n, dtype=np.int64)
-    out_t = np.empty(n)
-    out_e = np.empty(n, dtype=np.int64)
-    fast_heights_kernel(*arrays, float(h_min), float(h_max), float(c_ign), float(melt_factor),
-                        MELT_TABLE, _GL_X01, _GL_W01, N_TIMES, out_h, out_c, out_t, out_e)
-    return {"critical_height": out_h, "censored": out_c, "exit_time": out_t,
-            "exit_code": out_e}
-
-
-def scene_columns(scenes):
-    """Columns of :data:`SCENE_FIELDS` from a sequence of scenes (for :func:`fast_critical_heights`)."""
-    return {f: np.array([float(getattr(s, f)) for s in scenes]) for f in SCENE_FIELDS}

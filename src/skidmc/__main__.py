@@ -1,0 +1,7 @@
+"""``python -m skidmc``: the ``skidmc`` command."""
+
+import sys
+
+from skidmc.cli import main
+
+sys.exit(main())

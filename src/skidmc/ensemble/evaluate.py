@@ -1,0 +1,193 @@
+"""In-process evaluation of a batch of scenes: one status and height per sample.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from skidmc.scene import NUMERIC_KEYS, Scene, SceneColumns, make_scene
+
+if TYPE_CHECKING:
+    pass
+
+__all__ = [
+    "BatchResult",
+    "as_rows",
+    "empty_result",
+    "evaluate_here",
+    "record_given",
+    "solver_kwargs",
+]
+
+
+
+@dataclasses.dataclass
+class BatchResult:
+    """Results of a batch of scene evaluations (arrays of the batch's length).
+
+    Attributes
+    ----------
+    critical_height : ndarray of float
+        Critical drop height [m]; the bound hit when censored; NaN when failed.
+    status : ndarray of str
+        ``ok``, ``censored_above``, ``censored_below`` or ``failed``.
+    evaluations : ndarray of int32
+        Impact simulations used [1] (0 when failed).
+    flags : ndarray of str
+        Solver flags, comma separated.
+    failure_reason : ndarray of str
+        ``"ExceptionType: message"`` for failed samples, else empty.
+    wall_time : ndarray of float
+        Time spent in the solver call per sample [s].
+    inputs : dict
+        Numeric scene key -> the values the sample was evaluated with [SI]; for a sample whose
+        scene could not be built, the values it was given.
+    """
+
+    critical_height: np.ndarray
+    status: np.ndarray
+    evaluations: np.ndarray
+    flags: np.ndarray
+    failure_reason: np.ndarray
+    wall_time: np.ndarray
+    inputs: dict[str, np.ndarray]
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+
+def as_rows(scenes) -> list:
+    """Batch forms -> list of Scene or mapping (columns {key: array} become rows)."""
+    if isinstance(scenes, Mapping):
+        columns = {k: np.asarray(v) for k, v in scenes.items()}
+        lengths = {len(v) for v in columns.values()}
+        if len(lengths) > 1:
+            raise ValueError(f"columns of different lengths: {sorted(lengths)}")
+        m = lengths.pop() if lengths else 0
+        return [{k: v[i].item() if v.dtype.kind != "O" else v[i] for k, v in columns.items()}
+                for i in range(m)]
+    if isinstance(scenes, Scene):
+        return [scenes]
+    return list(scenes)
+
+
+_STATUS_OF_CENSORING = {None: "ok", "above": "censored_above", "below": "censored_below"}
+
+
+def _solve(critical_height, scene: Scene, kwargs: dict) -> tuple[float, str, int, str, str]:
+    """(height [m], status, evaluations, flags, failure reason) of one scene; never raises."""
+    try:
+        res = critical_height(scene, **kwargs)
+    except Exception as exc:  # noqa: BLE001 - recorded, see the module docstring
+        return math.nan, "failed", 0, "", f"{type(exc).__name__}: {exc}"
+    h, flags, evaluations = float(res.critical_height), ",".join(res.flags), int(res.evaluations)
+    status = _STATUS_OF_CENSORING.get(res.censored)
+    if status is None:
+        return math.nan, "failed", evaluations, flags, f"unknown censoring {res.censored!r}"
+    if not math.isfinite(h):
+        return math.nan, "failed", evaluations, flags, f"solver returned a non-finite height ({h})"
+    return h, status, evaluations, flags, ""
+
+
+def _solve_into(out: BatchResult, i: int, critical_height, scene: Scene, kwargs: dict) -> None:
+    """Solve sample i's scene and record its outcome and solver wall time [s] in `out`."""
+    t0 = time.perf_counter()
+    (out.critical_height[i], out.status[i], out.evaluations[i], out.flags[i],
+     out.failure_reason[i]) = _solve(critical_height, scene, kwargs)
+    out.wall_time[i] = time.perf_counter() - t0
+
+
+def solver_kwargs(solver_options) -> dict:
+    """SolverOptions or mapping -> plain keyword arguments (picklable without skidmc.study)."""
+    if hasattr(solver_options, "as_kwargs"):  # a SolverOptions
+        return dict(solver_options.as_kwargs())
+    return dict(solver_options or {})
+
+
+def empty_result(m: int) -> BatchResult:
+    return BatchResult(
+        critical_height=np.full(m, np.nan), status=np.full(m, "failed", dtype=object),
+        evaluations=np.zeros(m, dtype=np.int32), flags=np.full(m, "", dtype=object),
+        failure_reason=np.full(m, "", dtype=object), wall_time=np.zeros(m),
+        inputs={k: np.full(m, np.nan) for k in NUMERIC_KEYS},
+    )
+
+
+def record_given(out: BatchResult, i: int, row, base_values: dict) -> None:
+    """Inputs of sample i as given (a row whose scene was never built)."""
+    if isinstance(row, Scene):
+        given = row.as_dict()
+    else:
+        given = {**base_values, **(row if isinstance(row, Mapping) else {})}
+    for k in NUMERIC_KEYS:
+        if isinstance(given.get(k), (int, float)):
+            out.inputs[k][i] = given[k]
+
+
+def evaluate_here(scenes, kwargs: dict, base: Scene | None) -> BatchResult:
+    """evaluate_batch in this process: columns through :func:`_evaluate_columns`, rows or
+    scenes through :func:`_evaluate_rows`."""
+    if isinstance(scenes, Mapping):
+        return _evaluate_columns(scenes, kwargs, base)
+    return _evaluate_rows(as_rows(scenes), kwargs, base)
+
+
+def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None) -> BatchResult:
+    """evaluate_batch in this process."""
+    from skidmc.solver import critical_height
+
+    m = len(rows)
+    out = empty_result(m)
+    base_values = base.as_dict() if base is not None else {}
+    for i, row in enumerate(rows):
+        try:
+            scene = row if isinstance(row, Scene) else make_scene(row, preset=base)
+        except Exception as exc:  # noqa: BLE001 - an invalid sample fails alone, not the run
+            record_given(out, i, row, base_values)
+            out.failure_reason[i] = f"invalid inputs: {type(exc).__name__}: {exc}"
+            continue
+        values = scene.as_dict()
+        for k in NUMERIC_KEYS:
+            out.inputs[k][i] = values[k]
+        _solve_into(out, i, critical_height, scene, kwargs)
+    return out
+
+
+def _evaluate_columns(columns: Mapping, kwargs: dict, base: Scene | None) -> BatchResult:
+    """evaluate_batch of columns ``{key: array}`` in this process (a study chunk's scene).
+
+    Columns of SI floats on a base scene (a study's samples) have their scenes built by
+    :class:`~skidmc.scene.SceneColumns`, which validates whole columns once instead of every key
+    of every row; anything else goes row by row through :func:`_evaluate_rows`. The result is
+    the same either way, bit for bit: the same scenes, the same errors, the same recorded inputs.
+    """
+    columns = {k: np.asarray(v) for k, v in columns.items()}
+    if not SceneColumns.accepts(base, columns):
+        return _evaluate_rows(as_rows(columns), kwargs, base)
+    from skidmc.solver import critical_height
+
+    scenes = SceneColumns(base, columns)
+    m = len(scenes)
+    out = empty_result(m)
+    # The inputs as given (the columns over the base), which record_given keeps for a row whose
+    # scene cannot be built; a built scene differs from them only in its derived keys.
+    base_values = base.as_dict()
+    for k in NUMERIC_KEYS:
+        out.inputs[k][:] = columns.get(k, base_values[k])
+    derived = [(out.inputs[k], k.replace(".", "_")) for k in scenes.derived]  # attribute names
+    for i in range(m):
+        try:
+            scene = scenes.scene(i)
+        except Exception as exc:  # noqa: BLE001 - an invalid sample fails alone, not the run
+            out.failure_reason[i] = f"invalid inputs: {type(exc).__name__}: {exc}"
+            continue
+        for values, field in derived:
+            values[i] = getattr(scene, field)
+        _solve_into(out, i, critical_height, scene, kwargs)
+    return out

@@ -1,0 +1,288 @@
+"""Where chunks of samples are evaluated: in process, local worker processes, or dask.
+"""
+
+from __future__ import annotations
+
+import atexit
+import concurrent.futures as cf
+import dataclasses
+import math
+import multiprocessing
+import os
+import sys
+import time
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from skidmc.scene import NUMERIC_KEYS, Scene
+from skidmc.ensemble.evaluate import (BatchResult, empty_result, evaluate_here, record_given)
+
+if TYPE_CHECKING:
+    pass
+
+__all__ = [
+    "Chunk",
+    "ChunkOut",
+    "DaskExecutor",
+    "InlineExecutor",
+    "POOLS",
+    "ProcessExecutor",
+    "default_workers",
+    "evaluate_chunk",
+    "failed_results",
+    "shared_pool",
+    "shutdown_workers",
+    "worker_died",
+]
+
+
+
+@dataclasses.dataclass
+class Chunk:
+    """What a worker needs for samples ``start:stop``: base scenes and each scene's overrides.
+
+    `overrides[j]` holds scene j's inputs: columns ``{key: array}`` (a study) or a list of rows
+    (Scene objects or mappings; :func:`evaluate_batch`). `options` are plain keyword arguments,
+    so that a worker never imports :mod:`skidmc.ensemble.study` (scipy.stats) to unpickle a chunk.
+    """
+
+    start: int
+    stop: int
+    scenes: tuple[Scene | None, ...]
+    overrides: list
+    options: dict
+    isolated: bool = False  # a retry of one sample after a worker died
+
+
+@dataclasses.dataclass
+class ChunkOut:
+    """A chunk's results and where/when it was computed (for the run report)."""
+
+    results: list[BatchResult]
+    pid: int | None = None
+    peak_rss_mib: float = math.nan  # the worker's peak resident memory so far
+    began: float = math.nan  # time.time() in the worker
+    ended: float = math.nan
+
+
+def _peak_rss_mib() -> float:
+    """Peak resident memory of this process [MiB] (nan where the platform cannot tell)."""
+    try:
+        import resource
+    except ImportError:  # not on Unix
+        return math.nan
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if sys.platform == "darwin" else peak / 1024  # bytes on macOS, else KiB
+
+
+def evaluate_chunk(chunk: Chunk) -> ChunkOut:
+    """Worker entry point (module level: picklable for processes and dask)."""
+    began = time.time()
+    results = [evaluate_here(ov, chunk.options, sc)
+               for sc, ov in zip(chunk.scenes, chunk.overrides)]
+    return ChunkOut(results, os.getpid(), _peak_rss_mib(), began, time.time())
+
+
+def _worker_probe(_=None) -> tuple[int, float, float]:
+    """(pid, peak RSS, current RSS [MiB]) of the worker that runs it (benchmarks/throughput.py);
+    the current RSS is nan where /proc is missing."""
+    try:
+        with open("/proc/self/statm") as f:
+            rss = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, AttributeError):
+        rss = math.nan
+    return os.getpid(), _peak_rss_mib(), rss
+
+
+def failed_results(chunk: Chunk, reason: str) -> list[BatchResult]:
+    """Results marking every sample of a chunk failed (the worker died), inputs as given."""
+    out = []
+    m = chunk.stop - chunk.start
+    for sc, ov in zip(chunk.scenes, chunk.overrides):
+        res = empty_result(m)
+        res.failure_reason[:] = reason
+        if isinstance(ov, Mapping):  # a study's columns on a base scene
+            for k, v in sc.as_dict().items():
+                if k in NUMERIC_KEYS:
+                    res.inputs[k][:] = v
+            for k, v in ov.items():
+                res.inputs[k] = np.asarray(v, dtype=float)
+        else:  # evaluate_batch rows
+            base_values = sc.as_dict() if sc is not None else {}
+            for i, row in enumerate(ov):
+                record_given(res, i, row, base_values)
+        out.append(res)
+    return out
+
+
+def _warm_worker(warm_up: dict | None) -> None:
+    """Initializer of a local worker: import the solver, load its compiled kernels once.
+
+    A small solve (paper-quartz at the given options) makes numba load the kernels from its
+    cache (or compile them) now rather than in the first sample; its result is discarded, and
+    nothing it does can fail the worker.
+    """
+    try:
+        from skidmc.solver import critical_height
+
+        if warm_up is not None:
+            from skidmc.scene import get_preset
+
+            critical_height(get_preset("paper-quartz"), **warm_up)
+    except Exception:  # noqa: BLE001, S110 - a warm-up only; the samples report any error
+        pass
+
+
+def _ping(_=None) -> int:
+    return os.getpid()
+
+
+class InlineExecutor:
+    """Executor that runs each task when submitted (workers = 1: no process to start)."""
+
+    workers = 1
+
+    def submit(self, fn, arg):
+        fut = cf.Future()
+        try:
+            fut.set_result(fn(arg))
+        except Exception as exc:  # noqa: BLE001 - surfaced by fut.result(), as from a pool
+            fut.set_exception(exc)
+        return fut
+
+    def wait_first(self, futures):
+        return futures  # all done already
+
+    def restart(self) -> None:
+        pass
+
+    def shutdown(self):
+        pass
+
+
+#: Warm-up options of a worker (the cheapest full-tier solve that loads every kernel).
+_WARM_UP = {"rtol": 0.1, "tier": "full"}
+
+
+def _mp_context():
+    """forkserver where available (workers forked from one warm server process), else spawn."""
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        ctx = multiprocessing.get_context("forkserver")
+        # Modules the server imports once, before forking any worker (no effect once running).
+        # Not skidmc.runner itself: `python -m skidmc.runner` re-runs it as the workers' main
+        # module, which runpy warns about when it is imported already; its imports are these.
+        ctx.set_forkserver_preload(["__main__", "skidmc.scene", "skidmc.solver"])
+        return ctx
+    return multiprocessing.get_context("spawn")
+
+
+class ProcessExecutor:
+    """Local worker processes (forkserver or spawn: safe with threads in the parent)."""
+
+    def __init__(self, workers: int) -> None:
+        self.workers = workers
+        self._pool = self._new()
+
+    def _new(self):
+        pool = cf.ProcessPoolExecutor(self.workers, mp_context=_mp_context(),
+                                      initializer=_warm_worker, initargs=(_WARM_UP,))
+        # Start every worker now (the pool would start them one per submitted task), so that
+        # they import and warm up while the caller prepares its first chunks.
+        for _ in range(self.workers):
+            pool.submit(_ping)
+        return pool
+
+    def submit(self, fn, arg):
+        try:
+            return self._pool.submit(fn, arg)
+        except cf.process.BrokenProcessPool as exc:
+            # A worker died since the last results came back: the task fails as the ones in
+            # flight do, and the caller's retry logic takes it from there.
+            fut = cf.Future()
+            fut.set_exception(exc)
+            return fut
+
+    def wait_first(self, futures):
+        return cf.wait(futures, return_when=cf.FIRST_COMPLETED).done
+
+    def restart(self) -> None:
+        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool = self._new()
+
+    def shutdown(self):
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+#: Warm local pools of evaluate_batch (and of runs that find one), by worker count.
+POOLS: dict[int, ProcessExecutor] = {}
+
+
+def shared_pool(workers: int) -> ProcessExecutor:
+    pool = POOLS.get(workers)
+    if pool is None:
+        pool = POOLS[workers] = ProcessExecutor(workers)
+    return pool
+
+
+def shutdown_workers() -> None:
+    """End the warm local worker processes that :func:`evaluate_batch` keeps between calls."""
+    while POOLS:
+        _, pool = POOLS.popitem()
+        pool.shutdown()
+
+
+atexit.register(shutdown_workers)
+
+
+class DaskExecutor:
+    """Chunks sent to a dask.distributed cluster (an address, a Client, or a LocalCluster)."""
+
+    def __init__(self, scheduler, workers: int | None) -> None:
+        from distributed import Client, LocalCluster
+
+        self._own = []
+        if scheduler is None or scheduler == "dask":
+            cluster = LocalCluster(n_workers=workers or default_workers(), threads_per_worker=1,
+                                   processes=True, dashboard_address=None)
+            self._own.append(cluster)
+            scheduler = cluster
+        if isinstance(scheduler, Client):
+            self.client = scheduler
+        else:
+            self.client = Client(scheduler)
+            self._own.insert(0, self.client)
+        self.workers = max(1, sum(self.client.nthreads().values()))
+
+    def submit(self, fn, arg):
+        return self.client.submit(fn, arg, pure=False)
+
+    def wait_first(self, futures):
+        from distributed import wait
+
+        return wait(futures, return_when="FIRST_COMPLETED").done
+
+    def restart(self) -> None:
+        pass  # the scheduler replaces dead workers itself
+
+    def shutdown(self):
+        for obj in self._own:
+            obj.close()
+
+
+def default_workers() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def worker_died(exc: BaseException) -> bool:
+    if isinstance(exc, cf.process.BrokenProcessPool):
+        return True
+    try:
+        from distributed import KilledWorker
+    except ImportError:  # pragma: no cover - distributed is a dependency
+        return False
+    return isinstance(exc, KilledWorker)

@@ -1,0 +1,174 @@
+"""The fast tier at the scene level: critical heights of scenes by the reduced model.
+
+The model and its compiled kernels are :mod:`skidmc.physics.fast` (its docstring derives the
+model and states how its two constants were fitted and its error measured). This module feeds
+scenes to those kernels and reports results as the full tier does: the same
+:class:`~skidmc.solver.results.HeightResult`, with the terms and validity flags inferred by
+:func:`skidmc.solver.model.build_model` (without its meshes), so that both tiers describe a scene
+alike.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+
+import numpy as np
+
+from skidmc.errors import SceneError
+from skidmc.physics.fast import (_GL_W01, _GL_X01, _G, C_IGNITION, CENSOR_ABOVE, CENSOR_BELOW,
+                                 CENSOR_NONE, ERROR_ESTIMATE, EXIT_REBOUND, EXIT_STOPS_SLIDING,
+                                 MELT_FACTOR, MELT_TABLE, N_TIMES, duhamel_theta,
+                                 fast_height_kernel, fast_heights_kernel, impact_mechanics)
+from skidmc.solver.results import HeightResult
+
+__all__ = [
+    "SCENE_FIELDS",
+    "fast_critical_height",
+    "fast_critical_heights",
+    "scene_columns",
+    "theta_history",
+]
+
+#: Scene attributes in the kernels' argument order.
+SCENE_FIELDS = (
+    "mu", "flow_stress", "billet_mass", "billet_diameter", "angle", "tilt",
+    "initial_temperature", "he_density", "he_heat_capacity", "he_conductivity",
+    "he_heat_of_fusion", "he_melting_point", "kinetics_prefactor",
+    "kinetics_activation_temperature", "kinetics_heat_of_reaction", "target_density",
+    "target_heat_capacity", "target_conductivity",
+)
+
+#: The scene's values in the kernels' argument order (a Scene stores validated floats).
+_scene_values = operator.attrgetter(*SCENE_FIELDS)
+
+_CENSOR_NAMES = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
+_EXIT_NAMES = {EXIT_REBOUND: "rebound", EXIT_STOPS_SLIDING: "stops_sliding"}
+
+
+def theta_history(scene, n_times=N_TIMES):
+    """Inert interface temperature rise per root height of a scene (for checks and figures).
+
+    Parameters
+    ----------
+    scene : skidmc.scene.Scene
+    n_times : int
+        Number of uniform times in (0, t_exit].
+
+    Returns
+    -------
+    times : ndarray
+        [s].
+    theta : ndarray
+        Theta(t) [K/m^0.5]: T_s - T0 = sqrt(H) Theta(t) for an inert HE.
+    """
+    omega, t_exit, _, s, c = impact_mechanics(scene.mu, scene.flow_stress, scene.billet_mass,
+                                              scene.billet_diameter, scene.angle, scene.tilt)
+    e1 = math.sqrt(scene.he_conductivity * scene.he_density * scene.he_heat_capacity)
+    e2 = math.sqrt(scene.target_conductivity * scene.target_density
+                   * scene.target_heat_capacity)
+    times = t_exit * np.arange(1, n_times + 1) / n_times
+    theta = np.empty(n_times)
+    duhamel_theta(scene.mu * scene.flow_stress * math.sqrt(2.0 * _G), s, c, omega, t_exit,
+                  e1 + e2, times, _GL_X01, _GL_W01, theta)
+    return times, theta
+
+
+def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,
+                         melt_factor=MELT_FACTOR):
+    """Critical drop height of a scene by the fast (reduced) tier [m].
+
+    Parameters
+    ----------
+    scene : skidmc.scene.Scene
+    h_min, h_max : float
+        Search bounds [m]; no event at ``h_max`` is censored "above", an event at ``h_min``
+        "below".
+    melting : bool
+        Account for melting of the HE (as the full model's switch).
+    c_ign, melt_factor : float
+        The fitted constants (defaults :data:`C_IGNITION`, :data:`MELT_FACTOR`), exposed for the
+        fit in ``scripts/fast_tier_error.py``.
+
+    Returns
+    -------
+    skidmc.solver.HeightResult
+        ``evaluations=0`` (no PDE run), ``method="fast"``, ``error_estimate`` =
+        :data:`ERROR_ESTIMATE` (measured, see module docstring).
+    """
+    if not (0.0 < h_min < h_max):
+        raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
+    args = list(_scene_values(scene))
+    if not melting:
+        args[10] = 0.0
+    h, cens, t_exit, ecode, melts = fast_height_kernel(
+        *args, float(h_min), float(h_max), float(c_ign), float(melt_factor), MELT_TABLE,
+        _GL_X01, _GL_W01, N_TIMES)
+    terms, flags = _terms_and_flags(scene, ecode, melts)
+    censored = _CENSOR_NAMES[int(cens)]
+    height = {"above": h_max, "below": h_min}.get(censored, float(h))
+    return HeightResult(critical_height=height, censored=censored, evaluations=0,
+                        flags=flags, error_estimate=ERROR_ESTIMATE, rtol=ERROR_ESTIMATE,
+                        level=0.0, method="fast", exit_time=float(t_exit),
+                        exit_kind=_EXIT_NAMES[int(ecode)], terms=terms)
+
+
+def _terms_and_flags(scene, exit_code, melts):
+    """Terms and flags as :func:`skidmc.solver.model.build_model` infers them (without its meshes)."""
+    terms = ["frictional_heating", "friction_spin"]
+    flags = []
+    if scene.tilt > 0.0:
+        terms.append("normal_force_spin")
+    if exit_code == EXIT_STOPS_SLIDING:
+        flags.append("stops_sliding")
+    if scene.mu == 0.0:
+        terms = []
+        flags.append("no_friction")
+    elif melts:
+        terms.append("melting")
+    return tuple(terms), tuple(flags)
+
+
+def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,
+                          melt_factor=MELT_FACTOR, **columns):
+    """Critical heights of many scenes in one compiled call [m].
+
+    Parameters
+    ----------
+    h_min, h_max : float
+        Search bounds [m].
+    melting : bool
+        Account for melting.
+    c_ign, melt_factor : float
+        Fitted constants.
+    **columns : array_like
+        One 1-D array (or scalar, broadcast) per name of :data:`SCENE_FIELDS` (Scene attribute
+        names, SI units, angles in degrees). All are required.
+
+    Returns
+    -------
+    dict
+        ``critical_height`` [m] (the bound for censored rows), ``censored`` (int codes
+        :data:`CENSOR_NONE`/``ABOVE``/``BELOW``), ``exit_time`` [s], ``exit_code``.
+    """
+    missing = [f for f in SCENE_FIELDS if f not in columns]
+    if missing:
+        raise TypeError(f"missing columns: {missing}")
+    arrays = np.broadcast_arrays(*[np.asarray(columns[f], dtype=float) for f in SCENE_FIELDS])
+    arrays = [np.ascontiguousarray(np.atleast_1d(a), dtype=float) for a in arrays]
+    if not melting:
+        arrays[10] = np.zeros_like(arrays[10])
+    n = arrays[0].shape[0]
+    out_h = np.empty(n)
+    out_c = np.empty(n, dtype=np.int64)
+    out_t = np.empty(n)
+    out_e = np.empty(n, dtype=np.int64)
+    fast_heights_kernel(*arrays, float(h_min), float(h_max), float(c_ign), float(melt_factor),
+                        MELT_TABLE, _GL_X01, _GL_W01, N_TIMES, out_h, out_c, out_t, out_e)
+    return {"critical_height": out_h, "censored": out_c, "exit_time": out_t,
+            "exit_code": out_e}
+
+
+def scene_columns(scenes):
+    """Columns of :data:`SCENE_FIELDS` from a sequence of scenes (for :func:`fast_critical_heights`)."""
+    return {f: np.array([float(getattr(s, f)) for s in scenes]) for f in SCENE_FIELDS}

@@ -1,0 +1,136 @@
+"""Accuracy plan and calibrated error model of the critical-height search.
+
+The tolerance ``rtol`` on the critical height is shared three ways: the mesh and time steps
+(a refinement level, or a Richardson pair of levels), the smoothing of HMX's melting step (its
+width) and the root finder on ln H. The discretisation error model is calibrated by the
+refinement study (``python scripts/refinement_study.py``, ``results/validation/refinement.md``).
+"""
+
+from __future__ import annotations
+
+import math
+
+from skidmc.errors import SceneError
+from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
+
+__all__ = [
+    "DISCRETISATION_SHARE",
+    "ERROR_LEVEL0",
+    "MAX_MELT_WIDTH",
+    "MELT_SHARE",
+    "RICHARDSON_ERROR_LEVEL0",
+    "RICHARDSON_MIN_LEVEL",
+    "ROOT_SHARE",
+    "extrapolated_error",
+    "level_for_rtol",
+    "melt_bias",
+    "melt_width_for_rtol",
+    "modelled_error",
+    "plan_for_rtol",
+    "root_tolerance",
+]
+
+#: Numerical-error calibration. The refinement study (``python scripts/refinement_study.py``,
+#: results/validation/refinement{,_w4,_w1}.md: the level's floor melting width, 4 K and 1 K)
+#: measures the discretisation error of the critical height at level L, over all report
+#: presets and the second series' extreme mu, as second order from level 0 with a worst
+#: case of 7.9e-3 * 4**-L (observed 7.9e-3, 3.7e-3, 1.9e-3, 9.9e-4, 4.8e-4, 2.4e-4 at
+#: L = 0 ... 2.5). ERROR_LEVEL0 bounds every observed level from above, with >= 12 % to
+#: spare. The tolerance rtol is shared three ways: DISCRETISATION_SHARE to the mesh and time
+#: steps (the solver picks the lowest (half-)level whose modelled error is below it),
+#: MELT_SHARE to the smoothing of the melting step (its width, :func:`melt_width_for_rtol`)
+#: and ROOT_SHARE to the root finder (on ln H). The root finder also gets what the chosen
+#: plan leaves unused of the other two shares (:func:`root_tolerance`): levels come in
+#: half steps, so the modelled discretisation error is often well below its share.
+ERROR_LEVEL0 = 9.0e-3
+DISCRETISATION_SHARE = 0.6
+MELT_SHARE = 0.2
+ROOT_SHARE = 0.2
+#: Widest melting step used [K]: the bias per kelvin was measured up to 4 K.
+MAX_MELT_WIDTH = 4.0
+
+#: Richardson extrapolation (second order) of the searches at levels L - 1 and L. The
+#: refinement study measures its residual error, over all report presets, the second
+#: series' extreme mu and the three melting widths, as 5.6e-4, 3.2e-4, 8.4e-5, 5.2e-5 at
+#: L = 1, 1.5, 2, 2.5 (6.7e-4 at L = 1 in a repeat whose searches took other paths: level 0's
+#: margin carries ~1e-4 of step-size noise). RICHARDSON_ERROR_LEVEL0 * 4**-L bounds every
+#: observed value from L = 1 (RICHARDSON_MIN_LEVEL) up, with 16 % to spare at L = 1.
+RICHARDSON_ERROR_LEVEL0 = 3.2e-3
+
+RICHARDSON_MIN_LEVEL = 1.0
+
+
+def melt_width_for_rtol(rtol, level=0.0):
+    """Width of the smoothed melting step [K] for tolerance ``rtol`` at ``level``.
+
+    The widest width whose bias, first order in the width and at most
+    :data:`skidmc.solver.model.MELT_WIDTH_BIAS_PER_K` per kelvin, stays below MELT_SHARE * rtol;
+    at most :data:`MAX_MELT_WIDTH` and at least :func:`melt_width_floor` of ``level``.
+    """
+    return max(melt_width_floor(level),
+               min(MAX_MELT_WIDTH, MELT_SHARE * rtol / MELT_WIDTH_BIAS_PER_K))
+
+
+def root_tolerance(rtol, level, extrapolate, melt_width):
+    """Tolerance of the root finder on ln H [1] for a plan ``(level, extrapolate)``.
+
+    What ``rtol`` leaves after the modelled discretisation error of the plan
+    (:func:`modelled_error` or :func:`extrapolated_error`) and the melting width's bias bound,
+    and never less than ROOT_SHARE * rtol: the three modelled errors then add up to at most
+    ``rtol`` (or to the plan's error plus ROOT_SHARE * rtol when a forced level is coarser
+    than ``rtol`` asks for).
+    """
+    discretisation = extrapolated_error(level) if extrapolate else modelled_error(level)
+    melt = (MELT_WIDTH_BIAS_PER_K * melt_width
+            if melt_width > melt_width_floor(level) * (1.0 + 1e-9) else 0.0)
+    return max(ROOT_SHARE * rtol, rtol - discretisation - melt)
+
+
+def modelled_error(level):
+    """Modelled relative discretisation error of the critical height at ``level`` [1]."""
+    return ERROR_LEVEL0 * 4.0 ** (-level)
+
+
+def _half_level_above(needed):
+    """Smallest half-integer level >= ``needed`` (and >= 0)."""
+    return max(0.0, math.ceil(2.0 * needed - 1e-9) / 2.0)
+
+
+def level_for_rtol(rtol):
+    """Lowest half-integer refinement level whose modelled error is below 0.6 rtol [1]."""
+    if not rtol > 0.0:
+        raise SceneError("rtol", rtol, "must be > 0")
+    return _half_level_above(
+        math.log(ERROR_LEVEL0 / (DISCRETISATION_SHARE * rtol)) / math.log(4.0))
+
+
+def extrapolated_error(level):
+    """Modelled relative error of the Richardson value from levels ``level - 1`` and ``level`` [1]."""
+    return RICHARDSON_ERROR_LEVEL0 * 4.0 ** (-level)
+
+
+def plan_for_rtol(rtol):
+    """Cheapest way to reach ``rtol``: ``(level, extrapolate)``.
+
+    Either one search at :func:`level_for_rtol`, or (when that is cheaper) a search at
+    ``level - 1`` and one at ``level`` combined by Richardson extrapolation, whose modelled
+    error :func:`extrapolated_error` is below 0.6 rtol. Extrapolation is offered only from
+    :data:`RICHARDSON_MIN_LEVEL` up, where the refinement study shows second order.
+    """
+    plain = level_for_rtol(rtol)
+    extrapolated = max(RICHARDSON_MIN_LEVEL, _half_level_above(
+        math.log(RICHARDSON_ERROR_LEVEL0 / (DISCRETISATION_SHARE * rtol)) / math.log(4.0)))
+    # A search at level L costs ~2.2^L simulations' worth; the pair costs ~1.45x level L.
+    if extrapolated < plain:
+        return extrapolated, True
+    return plain, False
+
+def melt_bias(terms, melt_width, level):
+    """Bound on the relative bias of the smoothed melting step [1].
+
+    0 without melting, and at the level's floor width, where the bias is part of the
+    level's modelled error (:data:`skidmc.solver.model.MELT_WIDTH_LEVEL0`).
+    """
+    if "melting" not in terms or melt_width <= melt_width_floor(level) * (1.0 + 1e-9):
+        return 0.0
+    return MELT_WIDTH_BIAS_PER_K * melt_width

@@ -1,0 +1,280 @@
+"""Root finders of the search, each a pure function of a margin m(x), x = ln H.
+
+``margin(x)`` runs (or recalls) one simulation and returns ln(t_ev / t_exit): go <=> m <= 0.
+The finders differ in what they know beforehand: a guess and a slope (:func:`go_side_root`,
+:func:`guided_root`), nothing (:func:`brent_root`, :func:`bisection_root`).
+"""
+
+from __future__ import annotations
+
+import math
+
+from scipy.optimize import brentq
+
+from skidmc.solver.simulate import SolverError
+
+__all__ = [
+    "CARRIED_GO_SLOPE_ERROR",
+    "DEFAULT_GO_SLOPE",
+    "DEFAULT_GO_SLOPE_ERROR",
+    "FAST_GUESS_ERROR",
+    "GO_BEND",
+    "GO_SECANT_SPAN",
+    "bisection_root",
+    "brent_root",
+    "go_side_root",
+    "go_side_slope",
+    "guided_root",
+    "margin_slope",
+]
+
+_EPS = 2.220446049250313e-16  # float64 machine epsilon, np.finfo(float).eps
+
+#: Relative error of the fast tier's height used as a first guess [1]: about its median
+#: against the full model on the studies' ranges (1.3 %; p90 4.6 %, worst ~10 %,
+#: results/benchmarks/fast_tier.md). The go-side search starts this far above the guess;
+#: a guess further off costs one or two more simulations, never a wrong root.
+FAST_GUESS_ERROR = 0.02
+
+#: d margin / d ln H on the go side [1] when nothing better is known: t_ev ~ H^-s with s
+#: measured 1.1-1.35 on the report presets (rebound exits), and its relative uncertainty.
+DEFAULT_GO_SLOPE = -1.25
+DEFAULT_GO_SLOPE_ERROR = 0.3
+#: Relative uncertainty of a go-side slope carried over from a coarser level's search.
+#: Measured against the fine level's own secant from the root to 0.2-2 % above it, on the
+#: report presets (gold aside: stops sliding) for the Richardson pairs (0, 1) and (0.5, 1.5):
+#: 0.05 % to 9.6 % (alumina 50-80 uin, pair (0.5, 1.5)); 0.15 leaves 1.5x to spare. It
+#: bounds the error of a root extrapolated from one fine go point (:func:`go_side_root`).
+CARRIED_GO_SLOPE_ERROR = 0.15
+#: Go points farther than this from the root [1, in ln H] are not used for the secant slope.
+GO_SECANT_SPAN = 0.1
+#: Bend of the go-side margin [1]: a secant through go points at distances d_a < d_b (in
+#: ln H) from the root misses it by about GO_BEND * d_a * d_b (a quadratic's interpolation
+#: error, kappa d_a d_b / (2 |s|)). Measured 0.39 on paper2-quartz (secant through d = 0.034
+#: and 0.106 missed by 1.4e-3); 1.0 leaves a factor 2.5 to spare.
+GO_BEND = 1.0
+
+
+def margin_slope(history):
+    """d margin / d ln H [1] across the sign change of a finished search's history, or None."""
+    pts = [(math.log(h), m) for h, m in history if math.isfinite(m)]
+    for (x0, m0), (x1, m1) in zip(pts, pts[1:]):
+        if m0 > 0.0 >= m1 and x1 > x0:
+            return (m1 - m0) / (x1 - x0)
+    return None
+
+
+def _margin_inside(margin, x, x_min, x_max):
+    """The margin at ``x``, or None when x leaves (x_min, x_max) or the margin is not finite:
+    the guided searches then hand over to bracketing and Brent's method."""
+    if not (x_min < x < x_max):
+        return None
+    m = margin(x)
+    return m if math.isfinite(m) else None
+
+
+def go_side_slope(history):
+    """d margin / d ln H [1] between the two go points (m <= 0) closest to the root, or None."""
+    go = [(math.log(h), m) for h, m in history if math.isfinite(m) and m <= 0.0]
+    if len(go) < 2:
+        return None
+    (x0, m0), (x1, m1) = go[0], go[1]
+    slope = (m1 - m0) / (x1 - x0)
+    return slope if slope < 0.0 else None
+
+
+def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
+                  max_simulations=8):
+    """Root of the margin on ln H by extrapolation from its go side (m <= 0); or None.
+
+    For a rebound exit the margin is analytic on the go side up to the root: the event
+    comes before t_exit, under the true flux, and t_ev ~ H^-s with s nearly constant (its
+    secant slope changes by < 1 % over 5 % of H on the report presets). On the no-go side
+    the event falls after t_exit, under the extension flux, and the margin bends (its slope
+    changes by ~30 % within 0.5 % of H_c, with a kink at the root). So the root is taken from
+    a secant through go points only, once the closest go point lies within ``4 x_tol`` of
+    it (the extrapolation error is then that distance times the slope's relative change over
+    it, far below ``x_tol``) or the secant's modelled bend error (:data:`GO_BEND`) is below
+    ``x_tol / 2``. With one go point and a slope carried from a coarser level, the root is
+    extrapolated along that slope and accepted when its modelled error, the distance times
+    :data:`CARRIED_GO_SLOPE_ERROR`, is below ``x_tol / 2``. The secant uses the farthest go point within :data:`GO_SECANT_SPAN`, which
+    keeps the margin's ~1e-5 step-size noise out of the slope.
+
+    Each simulation aims just above the predicted root, by the prediction's own uncertainty
+    (at least ``1.5 x_tol``), so that it lands on the go side: from a coarse level's root and
+    slope this usually takes 2 simulations, from the fast tier's height 3. A no-go point
+    only bounds the root from below (and closes a bracket, accepted by linear interpolation
+    when it is ``4 x_tol`` wide). Returns None when the steps leave [x_min, x_max], meet a
+    non-finite margin, contradict monotonicity or do not converge: the caller then brackets
+    and runs Brent's method, reusing every simulation.
+    """
+    known = slope is not None and slope < 0.0
+    slope = slope if known else DEFAULT_GO_SLOPE
+    slope_error = CARRIED_GO_SLOPE_ERROR if known else DEFAULT_GO_SLOPE_ERROR
+    push = 1.5 * x_tol
+    go = []      # (x, m) with m <= 0, closest to the root first
+    lo = None    # (x, m) of the highest no-go point (m > 0)
+    x = x_guess + guess_error
+    for _ in range(max_simulations):
+        m = _margin_inside(margin, x, x_min, x_max)
+        if m is None:
+            return None
+        if m > 0.0:
+            if lo is None or x > lo[0]:
+                lo = (x, m)
+        else:
+            go.append((x, m))
+            go.sort()
+        if go and lo is not None and lo[0] >= go[0][0]:
+            return None  # not monotone at this scale: leave it to Brent
+        if go:
+            xa, ma = go[0]
+            far = [p for p in go[1:] if p[0] - xa <= GO_SECANT_SPAN]
+            if far:
+                xb, mb = far[-1]
+                secant = (mb - ma) / (xb - xa)
+                if not secant < 0.0:
+                    return None
+                root = xa - ma / secant
+                bend = GO_BEND * (xa - root) * (xb - root)
+                if (xa - root <= 4.0 * x_tol or bend <= 0.5 * x_tol) and (
+                        lo is None or root >= lo[0]):
+                    return root
+                uncertainty = max(push, bend)
+            else:
+                root = xa - ma / slope
+                # Extrapolating with a slope known to slope_error misses the root by
+                # about slope_error (xa - root): one go point suffices when that is small.
+                extrapolation_error = slope_error * (xa - root)
+                if known and extrapolation_error <= 0.5 * x_tol and (
+                        lo is None or root >= lo[0]):
+                    return root
+                uncertainty = max(push, extrapolation_error)
+            if lo is not None:
+                if xa - lo[0] <= 4.0 * x_tol:
+                    return lo[0] + lo[1] * (xa - lo[0]) / (lo[1] - ma)
+                if root <= lo[0]:
+                    # The go-side prediction is contradicted by a no-go point: interpolate
+                    # in the bracket instead.
+                    root = lo[0] + lo[1] * (xa - lo[0]) / (lo[1] - ma)
+                    uncertainty = push
+            x = root + uncertainty
+            if x >= xa - 0.5 * push:
+                # The prediction gives no progress: halve the way to the bracket's low end
+                # (or to the root predicted from below).
+                x = 0.5 * (xa + (lo[0] if lo is not None else root - uncertainty))
+        else:
+            # Only no-go points: t_ev ~ H^-s predicts the root above; aim past it.
+            root = lo[0] - lo[1] / slope
+            x = root + max(push, slope_error * (root - lo[0]))
+    return None
+
+
+def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=8):
+    """Root of the margin on ln H from a close guess ``x0``, always from a tight bracket; or None.
+
+    The margin is smooth but not linear near the root (its slope changes by ~30 % within
+    0.5 % of H_c, and it has a kink at the root itself, where the event moves from before to
+    after the exit) and carries ~1e-4 of step-size noise, so a root extrapolated from one
+    side is not trusted. Steps aim past the predicted root by ``1.5 x_tol`` so that they
+    bracket it; once a bracket [a, b] with m(a) > 0 >= m(b) is at most 4 x_tol wide, the
+    root is the linear interpolation inside it (error below the bracket width times the
+    slope's relative change, < x_tol). The first step uses ``slope`` (d margin / d ln H from
+    a coarser search; -1, the t_ev ~ 1/H scaling, when not known). Returns None when the
+    steps leave [x_min, x_max], meet a non-finite margin, or do not converge: the caller then
+    brackets and runs Brent's method, reusing every simulation.
+    """
+    slope = slope if slope is not None and slope < 0.0 else -1.0
+    push = 1.5 * x_tol
+    lo = hi = None  # (x, m) of the closest no-go (m > 0) and go (m <= 0) points
+    previous = None
+    x = x0
+    for _ in range(max_simulations):
+        m = _margin_inside(margin, x, x_min, x_max)
+        if m is None:
+            return None
+        if m > 0.0 and (lo is None or x > lo[0]):
+            lo = (x, m)
+        elif m <= 0.0 and (hi is None or x < hi[0]):
+            hi = (x, m)
+        if lo is not None and hi is not None:
+            if lo[0] >= hi[0]:
+                return None  # not monotone at this scale: leave it to Brent
+            root = lo[0] + lo[1] * (hi[0] - lo[0]) / (lo[1] - hi[1])
+            if hi[0] - lo[0] <= 4.0 * x_tol:
+                return root
+            # Shrink from the far end: step past the interpolated root, away from the
+            # nearer end, so that the new point lands on the far side's sign.
+            x = root - push if root - lo[0] > hi[0] - root else root + push
+        else:
+            # One-sided: secant (or the given slope) prediction, pushed past the root.
+            if previous is not None and x != previous[0]:
+                secant_slope = (m - previous[1]) / (x - previous[0])
+                if secant_slope < 0.0:
+                    slope = secant_slope
+            x_next = x - m / slope + (push if m > 0.0 else -push)
+            previous = (x, m)
+            x = x_next
+    return None
+
+
+def bisection_root(margin, x_min, x_max, x_tol):
+    """The report's search: geometric mean of the lowest go and the highest no-go."""
+    if margin(x_max) > 0.0:
+        return x_max, "above"
+    if margin(x_min) <= 0.0:
+        return x_min, "below"
+    lo, hi = x_min, x_max
+    while hi - lo > x_tol:
+        mid = 0.5 * (lo + hi)
+        if margin(mid) <= 0.0:
+            hi = mid
+        else:
+            lo = mid
+    return 0.5 * (lo + hi), None
+
+
+def brent_root(margin, x_min, x_max, x_tol, horizon, h_guess, overshoot=0.05):
+    """Bracket the root of the margin from a first guess, then Brent's method on ln H.
+
+    ``overshoot`` [1, in ln H] is added to each bracketing step beyond the root that the
+    margin predicts (t_ev ~ 1/H): about the error of the guess. ``horizon`` [1] is
+    ln(t_end / t_exit) of the model: "no event within the horizon" means m > horizon.
+    """
+    x = math.log(h_guess) if h_guess else 0.0  # 1 m by default
+    x = min(max(x, x_min), x_max)
+    lo = hi = None  # ln H of the highest no-go and the lowest go
+    # Smallest bracketing step, doubled after every step: a margin that hardly depends on H
+    # (e.g. a self-heating HE whose event time is set by its bulk, not by friction) still
+    # reaches the search bounds within the loop.
+    min_step = overshoot
+    for _ in range(60):
+        m = margin(x)
+        if m > 0.0:
+            lo = x if lo is None else max(lo, x)
+        else:
+            hi = x if hi is None else min(hi, x)
+        if lo is not None and hi is not None:
+            break
+        if m > 0.0:
+            if x >= x_max:
+                return x_max, "above"
+            # t_ev ~ 1/H: the root lies about m above; with no event in the horizon, at
+            # least `horizon` above. Overshoot a little so one step usually brackets.
+            step = 1.2 * m + overshoot if math.isfinite(m) else 2.0 * horizon
+            x = min(x + max(step, min_step), x_max)
+        else:
+            if x <= x_min:
+                return x_min, "below"
+            x = max(x - max(-1.2 * m + overshoot, min_step), x_min)
+        min_step *= 2.0
+    else:  # pragma: no cover - the loop always brackets or censors within 60 steps
+        raise SolverError("could not bracket the critical height")
+
+    def bounded(xx):
+        # Brent needs finite values; "no event within the horizon" means m > horizon.
+        m = margin(xx)
+        return m if math.isfinite(m) else 2.0 * horizon + 1.0
+
+    x_root = brentq(bounded, lo, hi, xtol=x_tol, rtol=4 * _EPS)
+    return x_root, None

@@ -1,0 +1,230 @@
+"""Simulation of one impact and the search for the critical drop height.
+
+The critical height H_c is where the time of the thermal event, t_ev(H), equals the
+exit time t_exit (rebound or end of sliding), which does not depend on H. The
+search works on the continuous margin
+
+    m(H) = ln(t_ev(H) / t_exit),     go  <=>  m <= 0,
+
+where, beyond t_exit, the flux is extended (:mod:`skidmc.solver.model`) so that t_ev stays
+finite a little below H_c; m is smooth and close to linear in ln H (the surface
+temperature rises roughly as sqrt(q^2 t) ~ sqrt(H t), so t_ev ~ 1/H), which lets a
+bracketing Brent iteration converge in a handful of simulations. The extension
+never changes a verdict: at the root, t_ev = t_exit and the extended flux has not
+acted yet. The report's own method, geometric bisection on go/no-go, is kept as
+``method="bisection"``.
+"""
+
+
+import math
+import time
+
+from skidmc.errors import SceneError
+from skidmc.solver.model import build_model
+from skidmc.solver.plan import (extrapolated_error, melt_bias, melt_width_for_rtol, modelled_error,
+                                plan_for_rtol, root_tolerance)
+from skidmc.solver.results import HeightResult
+from skidmc.solver.roots import (FAST_GUESS_ERROR, bisection_root, brent_root, go_side_root,
+                                 go_side_slope, guided_root, margin_slope)
+from skidmc.solver.simulate import simulate
+
+__all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "TIERS", "critical_height"]
+
+#: Model fidelity tiers: "full" (the report's model, converged to rtol) and "fast" (the
+#: reduced model of :mod:`skidmc.fast`, ~10-20 us per height, a few percent off the full model).
+TIERS = ("full", "fast")
+
+#: Default search bounds [m]: 1 mm to 10 km of drop height.
+DEFAULT_H_MIN = 1e-3
+DEFAULT_H_MAX = 1e4
+
+#: Coarse-to-fine search: at level L >= COARSE_GAP, the critical height is first found at level
+#: L - COARSE_GAP (each simulation ~10x cheaper), and the search at level L starts there with a
+#: bracket a few coarse errors wide, so it needs ~4 fine simulations instead of ~8.
+COARSE_GAP = 2.0
+
+
+def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
+                    *, method="brent", level=None, extrapolate=None, melting=True,
+                    runaway_fraction=None, h_guess=None, model=None, melt_width=None):
+    """Critical drop height of a scene [m].
+
+    Parameters
+    ----------
+    scene : skidmc.scene.Scene
+    rtol : float
+        Relative tolerance on the critical height [1]: 60 % goes to the mesh and
+        steps (see :func:`plan_for_rtol`), 20 % to the smoothing of the melting step
+        (:func:`melt_width_for_rtol`), 20 % to the root finder.
+    tier : {"full", "fast"}
+        Model fidelity: "full" is the report's model converged to ``rtol``; "fast" is the
+        reduced model of :func:`skidmc.solver.fast.fast_critical_height` (``rtol`` and the numerical
+        options do not apply; its measured error against the full model is in
+        ``results/benchmarks/fast_tier.md`` and in the result's ``error_estimate``).
+    h_min, h_max : float
+        Search bounds [m]. No event at ``h_max`` is censored "above"; an event at
+        ``h_min`` is censored "below". Neither is an error.
+    method : {"brent", "bisection"}
+        Brent's method on the continuous margin (default), or the report's
+        geometric bisection on go/no-go.
+    level : float, optional
+        Force a refinement level instead of deriving it from ``rtol``.
+    extrapolate : bool, optional
+        Richardson extrapolation from ``level - 1`` and ``level`` (second order). Default:
+        chosen with the level by :func:`plan_for_rtol`; False when ``level`` is forced.
+    melting : bool
+        Model melting of the HE.
+    runaway_fraction : float, optional
+        Override the runaway rule (:data:`skidmc.solver.model.DEFAULT_RUNAWAY_FRACTION`).
+    h_guess : float, optional
+        First height tried [m].
+    model : SkidModel, optional
+        A prebuilt model (overrides scene, level, melting, runaway_fraction, melt_width; no
+        extrapolation or coarse start).
+    melt_width : float, optional
+        Width of the smoothed melting step [K]; default :func:`melt_width_for_rtol`.
+
+    Returns
+    -------
+    HeightResult
+    """
+    start = time.perf_counter()
+    if tier not in TIERS:
+        raise SceneError("tier", tier, f"unknown tier (expected one of {', '.join(TIERS)})")
+    if not (0.0 < h_min < h_max):
+        raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
+    if tier == "fast":
+        from skidmc.solver.fast import fast_critical_height
+
+        res = fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
+        # The same validity flags as the full tier (scene and height), without its meshes.
+        model = build_model(scene, melting=melting, meshes=False)
+        res.flags = model.flags + model.height_flags(res.critical_height)
+        return res
+    if not (isinstance(rtol, (int, float)) and 0.0 < rtol < 0.5):
+        raise SceneError("rtol", rtol, "must be a number in (0, 0.5)")
+    if method not in ("brent", "bisection"):
+        raise SceneError("method", method, "expected 'brent' or 'bisection'")
+    if melt_width is not None and not (isinstance(melt_width, (int, float))
+                                       and melt_width > 0.0):
+        raise SceneError("melt_width", melt_width, "must be a number > 0 [K]")
+    if level is None:
+        level, planned = plan_for_rtol(rtol)
+        extrapolate = planned if extrapolate is None else extrapolate
+    extrapolate = bool(extrapolate) and model is None and level >= 1.0
+    if melt_width is None:
+        # The same width at every level of the search (coarse start, Richardson pair).
+        melt_width = melt_width_for_rtol(rtol, level)
+    common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
+                  runaway_fraction=runaway_fraction, melt_width=float(melt_width))
+    x_tol = root_tolerance(rtol, level, extrapolate, melt_width)
+    if not extrapolate:
+        res = _search(scene, rtol, level, x_tol, model=model, h_guess=h_guess, **common)
+        res.wall_time = time.perf_counter() - start
+        return res
+
+    # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
+    # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
+    # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
+    coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
+    # The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
+    # errors are negative and shrink 4x per level; the fine level keeps 1/4 of it): the
+    # go-side search starts that far up, which lands on the go side within the error model.
+    fine = _search(scene, rtol, level, 0.5 * x_tol,
+                   h_guess=coarse.critical_height if coarse.censored is None else None,
+                   overshoot=0.75 * modelled_error(level - 1.0),
+                   slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history),
+                   **common)
+    fine.evaluations += coarse.evaluations
+    fine.wall_time = time.perf_counter() - start
+    if fine.censored is None and coarse.censored is None:
+        correction = (fine.critical_height - coarse.critical_height) / 3.0
+        fine.critical_height += correction
+        fine.richardson_correction = correction / fine.critical_height
+        fine.extrapolated = True
+        fine.error_estimate = (extrapolated_error(level) + x_tol
+                               + melt_bias(fine.terms, melt_width, level))
+    return fine
+
+def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
+            melt_width, model=None, h_guess=None, overshoot=None, slope=None, go_slope=None):
+    """One critical-height search at one resolution level (see :func:`critical_height`).
+
+    ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
+    from the root found at ``level - COARSE_GAP`` (levels >= COARSE_GAP) or from the fast
+    tier's height. From a guess, steps that bracket the predicted root (:func:`guided_root`)
+    usually converge in 3-4 simulations; otherwise bracketing and Brent's method take over,
+    reusing every simulation done.
+    """
+    own_model = model is None
+    if own_model:
+        kwargs = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
+        model = build_model(scene, level=level, melting=melting, melt_width=melt_width,
+                            **kwargs)
+    base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
+                exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
+                error_estimate=(modelled_error(level) + x_tol
+                                + melt_bias(model.terms, model.resolution.melt_width,
+                                             level)))
+
+    if "no_friction" in model.flags:
+        return HeightResult(critical_height=h_max, censored="above", evaluations=0, **base)
+
+    coarse_evaluations = 0
+    if method == "brent" and h_guess is None and own_model and level >= COARSE_GAP:
+        coarse = _search(scene, rtol, level - COARSE_GAP,
+                         max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)), h_min=h_min,
+                         h_max=h_max, method=method, melting=melting,
+                         runaway_fraction=runaway_fraction, melt_width=melt_width)
+        coarse_evaluations = coarse.evaluations
+        if coarse.censored is None:
+            h_guess = coarse.critical_height
+            slope = margin_slope(coarse.history)
+            go_slope = go_side_slope(coarse.history)
+            # The fine root lies within the coarse level's error of the coarse root.
+            overshoot = 2.0 * modelled_error(level - COARSE_GAP)
+    elif method == "brent" and h_guess is None and own_model:
+        fast = _fast_guess(scene, h_min, h_max, melting)
+        if fast is not None:
+            h_guess, overshoot = fast, FAST_GUESS_ERROR
+
+    cache = {}
+
+    def margin(x):
+        if x not in cache:
+            cache[x] = simulate(model, math.exp(x)).margin
+        return cache[x]
+
+    x_min, x_max = math.log(h_min), math.log(h_max)
+    x_root = None
+    if method == "bisection":
+        x_root, censored = bisection_root(margin, x_min, x_max, x_tol)
+    elif h_guess is not None and model.exit_kind == "rebound":
+        x_root = go_side_root(margin, math.log(h_guess), go_slope, x_tol, x_min, x_max,
+                               guess_error=overshoot or FAST_GUESS_ERROR)
+        censored = None
+    elif h_guess is not None:
+        x_root, censored = guided_root(margin, math.log(h_guess), slope, x_tol, x_min, x_max), None
+    if x_root is None:
+        x_root, censored = brent_root(margin, x_min, x_max, x_tol,
+                                       math.log(model.end_time / model.exit_time), h_guess,
+                                  overshoot=overshoot or 0.05)
+    history = sorted((math.exp(x), m) for x, m in cache.items())
+    # Censored results report the bound itself, exactly as given.
+    height = {"above": h_max, "below": h_min}.get(censored, math.exp(x_root))
+    # Validity at the height found (indentation depth, sliding distance): skidmc.model.
+    base["flags"] = model.flags + model.height_flags(height)
+    return HeightResult(critical_height=height, censored=censored,
+                        evaluations=len(cache) + coarse_evaluations, history=history, **base)
+
+
+def _fast_guess(scene, h_min, h_max, melting):
+    """The fast tier's critical height [m] as a first guess, or None (censored or failed)."""
+    from skidmc.solver.fast import fast_critical_height
+
+    try:
+        res = fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
+    except Exception:  # noqa: BLE001 - only a guess: the full search does not need it
+        return None
+    h = res.critical_height
+    return h if res.censored is None and math.isfinite(h) else None

@@ -1,0 +1,96 @@
+"""One impact at one drop height: the thermal kernel run on a built model (report Eqs. 11-16).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from skidmc.physics.thermal import (INFO_EVENT, INFO_FAILED, INFO_REJECTED, INFO_STEPS,
+                                    INFO_T_EVENT, INFO_T_EXIT_MAX, INFO_T_MAX, INFO_Y_EXIT_MAX,
+                                    simulate_kernel)
+
+__all__ = ["MAX_STEPS", "Simulation", "SolverError", "simulate"]
+
+MAX_STEPS = 200_000
+
+
+class SolverError(RuntimeError):
+    """The time integration could not proceed (step size underflow or step cap)."""
+
+
+@dataclass
+class Simulation:
+    """Outcome of one impact at one drop height."""
+
+    height: float            # [m]
+    event: bool              # thermal event before the exit time
+    event_time: float        # [s] (inf: none within the horizon)
+    exit_time: float         # [s]
+    margin: float            # ln(t_ev / t_exit) [1] (inf when no event in the horizon)
+    steps: int
+    rejected: int
+    max_temperature: float   # highest HE cell temperature reached [K]
+    exit_max_temperature: float  # highest HE cell temperature at t_exit [K]
+    exit_max_reacted: float  # highest fraction reacted at t_exit [1]
+    times: np.ndarray | None = None                  # [s]
+    interface_temperature: np.ndarray | None = None  # [K]
+
+
+def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=None):
+    """Simulate the impact from drop height ``height`` [m].
+
+    Parameters
+    ----------
+    model : skidmc.solver.model.SkidModel
+    height : float
+        Vertical drop height H [m].
+    record : bool
+        Keep the interface temperature history (for checks and figures).
+    flux_override : tuple, optional
+        ``(q0, s, c, omega, t_exit, q_ext)`` to impose another flux shape (tests).
+
+    Returns
+    -------
+    Simulation
+    """
+    if flux_override is None:
+        q0 = model.flux_amplitude(height)
+        flux = (q0, model.slide_s, model.slide_c, model.omega, model.exit_time,
+                q0 * model.extension_flux_factor)
+    else:
+        flux = tuple(float(v) for v in flux_override)
+    n_rec = max_steps if record else 0
+    rec_t = np.zeros(min(n_rec, 100_000))
+    rec_tb = np.zeros_like(rec_t)
+    info = simulate_kernel(
+        model.width, model.rho_c, model.face_conductance, model.n_target, model.q_share_he,
+        model.he_density, model.latent_heat, model.melting_point, model.resolution.melt_width,
+        model.prefactor, model.activation_temperature, model.heat_of_reaction,
+        flux[0], flux[1], flux[2], flux[3], flux[4], flux[5], model.end_time,
+        model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
+        model.runaway_fraction, max_steps, rec_t, rec_tb)
+    if info[INFO_FAILED] or (info[INFO_STEPS] + info[INFO_REJECTED] >= max_steps
+                             and not info[INFO_EVENT]):
+        raise SolverError(
+            f"time integration failed at H = {height:.6g} m after {int(info[INFO_STEPS])} "
+            f"steps ({int(info[INFO_REJECTED])} rejected)")
+    t_ev = info[INFO_T_EVENT]
+    t_exit = model.exit_time
+    steps = int(info[INFO_STEPS])
+    sim = Simulation(
+        height=float(height), event=bool(info[INFO_EVENT]) and t_ev <= t_exit,
+        event_time=float(t_ev), exit_time=t_exit,
+        margin=math.log(t_ev / t_exit) if np.isfinite(t_ev) else math.inf,
+        steps=steps, rejected=int(info[INFO_REJECTED]),
+        max_temperature=float(info[INFO_T_MAX]),
+        exit_max_temperature=float(info[INFO_T_EXIT_MAX]),
+        exit_max_reacted=float(info[INFO_Y_EXIT_MAX]),
+    )
+    if record:
+        n = min(steps, rec_t.shape[0])
+        sim.times = rec_t[:n].copy()
+        sim.interface_temperature = rec_tb[:n].copy()
+    return sim
