@@ -83,8 +83,7 @@ def _scene_inputs(scene) -> dict[str, dict]:
 
 
 def _cmd_presets(args: argparse.Namespace) -> int:
-    from skidmc.scene import PRESETS, get_preset
-    from skidmc.scene import SI_UNITS
+    from skidmc.scene import PRESETS, SI_UNITS, get_preset
 
     names = [args.name] if args.name else list(PRESETS)
     scenes = {name: get_preset(name) for name in names}  # raises SceneError on an unknown name

@@ -8,10 +8,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from skidmc.ensemble.evaluate import (
+    BatchResult,
+    as_rows,
+    empty_result,
+    evaluate_here,
+    solver_kwargs,
+)
+from skidmc.ensemble.executors import Chunk, DaskExecutor, default_workers, shared_pool
+from skidmc.ensemble.schedule import Schedule, run_chunks
 from skidmc.scene import NUMERIC_KEYS, Scene
-from skidmc.ensemble.evaluate import (BatchResult, empty_result, evaluate_here, as_rows, solver_kwargs)
-from skidmc.ensemble.executors import (Chunk, DaskExecutor, default_workers, shared_pool)
-from skidmc.ensemble.schedule import (Schedule, run_chunks)
 
 if TYPE_CHECKING:
     from skidmc.ensemble.study import SolverOptions

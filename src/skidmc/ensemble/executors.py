@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from skidmc.ensemble.evaluate import BatchResult, empty_result, evaluate_here, record_given
 from skidmc.scene import NUMERIC_KEYS, Scene
-from skidmc.ensemble.evaluate import (BatchResult, empty_result, evaluate_here, record_given)
 
 if TYPE_CHECKING:
     pass

@@ -50,10 +50,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from skidmc.ensemble.evaluate import BatchResult, solver_kwargs
+from skidmc.ensemble.executors import (
+    POOLS,
+    Chunk,
+    ChunkOut,
+    DaskExecutor,
+    InlineExecutor,
+    ProcessExecutor,
+    default_workers,
+)
+from skidmc.ensemble.schedule import Schedule, run_chunks
 from skidmc.scene import SI_UNITS
-from skidmc.ensemble.evaluate import (BatchResult, solver_kwargs)
-from skidmc.ensemble.executors import (Chunk, ChunkOut, DaskExecutor, InlineExecutor, POOLS, ProcessExecutor, default_workers)
-from skidmc.ensemble.schedule import (Schedule, run_chunks)
 
 if TYPE_CHECKING:
     from skidmc.ensemble.storage import EnsembleFile

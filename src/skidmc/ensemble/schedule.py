@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from skidmc.ensemble.executors import (ChunkOut, evaluate_chunk, failed_results, worker_died)
+from skidmc.ensemble.executors import ChunkOut, evaluate_chunk, failed_results, worker_died
 
 if TYPE_CHECKING:
     pass

@@ -33,9 +33,9 @@ import h5netcdf
 import h5py
 import numpy as np
 
+from skidmc.ensemble.study import EXTRA_KEYS, RATE_AT_REFERENCE, Study
 from skidmc.errors import SkidmcError
 from skidmc.scene import DESCRIPTIONS, NUMERIC_KEYS, SI_UNITS
-from skidmc.ensemble.study import EXTRA_KEYS, RATE_AT_REFERENCE, Study
 
 __all__ = [
     "FORMAT",

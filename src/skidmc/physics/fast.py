@@ -86,13 +86,13 @@ import numpy as np
 from numba import njit
 from scipy.special import erfc
 
-
-#: Standard gravity [m/s^2] (same as :data:`skidmc.mechanics.STANDARD_GRAVITY`).
-_G = 9.80665
-#: I_cg / (W D^2) of a solid hemisphere [1] (83/320 R^2), as in :mod:`skidmc.physics.mechanics`.
-_INERTIA = 83.0 / 1280.0
-#: Centre-of-gravity offset per radius [1].
-_CG = 0.375
+from skidmc.physics.mechanics import (  # noqa: F401 (re-exported)
+    EXIT_REBOUND,
+    EXIT_STOPS_SLIDING,
+    STANDARD_GRAVITY,
+    impact_constants,
+)
+from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION
 
 #: Number of uniform times in (0, t_exit] on which Theta and the induction integral are taken.
 N_TIMES = 32
@@ -109,10 +109,6 @@ MELT_FACTOR = 0.49
 #: median 1.3 %, p90 4.6 %, max 9.6 %; on the shipped studies' samples alone p90 <= 3.8 %).
 ERROR_ESTIMATE = 0.05
 
-#: Runaway rule of the full model (skidmc.solver.model.DEFAULT_RUNAWAY_FRACTION), used only to decide,
-#: as the full model does, whether melting is modelled.
-_RUNAWAY_FRACTION = 1e-5
-
 #: Surface conversion of the report's event criterion y > 0.99: Z int exp(-T_a/T) dt = ln 100.
 _LN_CONVERSION = math.log(100.0)
 
@@ -123,7 +119,6 @@ _GL_W01 = 0.5 * _GL_W
 
 # Censoring codes of the kernels.
 CENSOR_NONE, CENSOR_ABOVE, CENSOR_BELOW = 0, 1, 2
-EXIT_REBOUND, EXIT_STOPS_SLIDING = 0, 1
 
 
 # --- melting table ------------------------------------------------------------------------------
@@ -181,49 +176,6 @@ MELT_TABLE = np.array([melt_depression(max(r, 1e-3)) for r in np.linspace(0.0, 1
 
 
 # --- kernels ------------------------------------------------------------------------------------
-
-@njit(cache=True)
-def impact_mechanics(mu, flow_stress, billet_mass, billet_diameter, angle, tilt):
-    """Height-independent mechanics of the impact (report Eqs. 2-10).
-
-    Parameters
-    ----------
-    mu : float
-        Apparent friction coefficient [1].
-    flow_stress, billet_mass, billet_diameter : float
-        sigma [Pa], W [kg], D [m].
-    angle, tilt : float
-        phi and psi [deg].
-
-    Returns
-    -------
-    omega : float
-        sqrt(pi sigma D / W) [rad/s].
-    t_exit : float
-        End of heating, min(t_c, t_s) [s].
-    exit_code : int
-        :data:`EXIT_REBOUND` or :data:`EXIT_STOPS_SLIDING`.
-    s, c : float
-        sin(phi) and C cos(phi) of Eq. (10) [1].
-    """
-    omega = math.sqrt(math.pi * flow_stress * billet_diameter / billet_mass)
-    t_c = 0.5 * math.pi / omega
-    phi = math.radians(angle)
-    psi = math.radians(tilt)
-    a_p = 1.0 - _CG * math.cos(psi)
-    b_p = _CG * math.sin(psi)
-    arm = 0.5 * math.hypot(a_p, b_p)
-    cc = mu + (a_p * mu + b_p) * arm / (2.0 * _INERTIA)
-    s = math.sin(phi)
-    c = cc * math.cos(phi)
-    tan_phi = math.tan(phi)
-    if cc >= tan_phi:
-        cos_wt = min(max(1.0 - tan_phi / cc, -1.0), 1.0)
-        t_s = math.acos(cos_wt) / omega
-        if t_s < t_c:
-            return omega, t_s, EXIT_STOPS_SLIDING, s, c
-    return omega, t_c, EXIT_REBOUND, s, c
-
 
 @njit(cache=True)
 def duhamel_theta(flux_per_root_height, s, c, omega, t_exit, e_sum, times, gl_x, gl_w, out):
@@ -391,7 +343,7 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
     melting : bool
         Whether melting was modelled.
     """
-    omega, t_exit, exit_code, s, c = impact_mechanics(mu, flow_stress, billet_mass,
+    omega, _, t_exit, exit_code, s, c = impact_constants(mu, flow_stress, billet_mass,
                                                       billet_diameter, angle, tilt)
     if not (mu > 0.0) or not (prefactor > 0.0):
         return h_max, CENSOR_ABOVE, t_exit, exit_code, False
@@ -402,7 +354,7 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
     for k in range(n_times):
         times[k] = t_exit * (k + 1.0) / n_times
     theta = np.empty(n_times)
-    duhamel_theta(mu * flow_stress * math.sqrt(2.0 * _G), s, c, omega, t_exit, e1 + e2,
+    duhamel_theta(mu * flow_stress * math.sqrt(2.0 * STANDARD_GRAVITY), s, c, omega, t_exit, e1 + e2,
                   times, gl_x, gl_w, theta)
     th_max = 0.0
     for k in range(n_times):
@@ -420,7 +372,7 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
         if rise_ad > 0.0:
             ln_tau_m = (2.0 * math.log(he_melting_point) - math.log(t_act * rise_ad) - ln_z
                         + t_act / he_melting_point)
-            include = ln_tau_m > math.log(_RUNAWAY_FRACTION * t_exit)
+            include = ln_tau_m > math.log(DEFAULT_RUNAWAY_FRACTION * t_exit)
         if include:
             melt_rise = melt_factor * he_heat_of_fusion / he_heat_capacity * share
     melting = melt_rise > 0.0

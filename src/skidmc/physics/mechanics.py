@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 #: Standard gravity [m/s^2] (the report's g in the drop velocity V0 = sqrt(2 g H)).
 STANDARD_GRAVITY = 9.80665
@@ -35,6 +36,10 @@ HEMISPHERE_INERTIA_FACTOR = 83.0 / 1280.0
 
 #: Distance of a hemisphere's centre of gravity from its flat face, per radius (3/8).
 CG_OFFSET_FACTOR = 0.375
+
+#: Exit codes of :func:`exit_from_constants` and their names.
+EXIT_REBOUND, EXIT_STOPS_SLIDING = 0, 1
+EXIT_KINDS = ("rebound", "stops_sliding")
 
 
 def impact_speed(height):
@@ -183,27 +188,30 @@ def exit_time(mu, angle, tilt, flow_stress, billet_mass, billet_diameter):
     """End of frictional heating [s] and its cause: ``(t_exit, "rebound" | "stops_sliding")``.
 
     The report's two non-event exits: "hemisphere rebounds" at t_c and "hemisphere
-    stops sliding" at t_s < t_c. Both are independent of the drop height. Scalars only.
+    stops sliding" at t_s < t_c (:func:`exit_from_constants`). Scalars only.
     """
-    omega = float(angular_frequency(flow_stress, billet_mass, billet_diameter))
-    coefficient = float(sliding_deceleration_coefficient(mu, tilt))
-    return exit_from_constants(omega, coefficient, angle)
+    _, _, t_exit, exit_code, _, _ = impact_constants(mu, flow_stress, billet_mass,
+                                                     billet_diameter, angle, tilt)
+    return t_exit, EXIT_KINDS[exit_code]
 
 
+@njit(cache=True)
 def exit_from_constants(omega, coefficient, angle):
-    """:func:`exit_time` from the impact's omega [rad/s] and C of Eq. (10) [1] (scalars).
+    """End of frictional heating from the impact's omega and C (scalars, compiled).
 
-    For callers that already hold omega and C (:func:`skidmc.solver.model.build_model`): the same
-    t_c and t_s as :func:`contact_time` and :func:`stop_time`, bit for bit, without
-    recomputing them or paying for the array machinery of :func:`stop_time` (most of the
-    cost of a mesh-less model, which the fast tier builds for every scene).
+    The report's two non-event exits: "hemisphere rebounds" at t_c = pi / (2 omega) and
+    "hemisphere stops sliding" at t_s, where V_r = 0: cos(omega t_s) = 1 - tan(phi) / C
+    (Eq. 10), inside the contact only when C >= tan(phi). Both are independent of the drop
+    height. The one definition of the exit, used by the full model
+    (:func:`skidmc.solver.model.build_model`, through :func:`impact_constants`) and by the fast
+    tier's kernels.
 
     Parameters
     ----------
     omega : float
         :func:`angular_frequency` [rad/s].
     coefficient : float
-        :func:`sliding_deceleration_coefficient` [1].
+        :func:`sliding_deceleration_coefficient` C [1].
     angle : float
         phi [deg].
 
@@ -211,19 +219,58 @@ def exit_from_constants(omega, coefficient, angle):
     -------
     t_exit : float
         [s].
-    kind : str
-        ``"rebound"`` or ``"stops_sliding"``.
+    exit_code : int
+        :data:`EXIT_REBOUND` or :data:`EXIT_STOPS_SLIDING` (names in :data:`EXIT_KINDS`).
     """
     t_c = 0.5 * math.pi / omega
-    # numpy's tan and arccos as in stop_time (not math's): same bits on every platform.
-    tan_phi = float(np.tan(np.radians(angle)))
+    tan_phi = math.tan(math.radians(angle))
     # C >= tan(phi) > 0 in this branch for a valid scene's 0 < phi < 90 deg.
     if coefficient >= tan_phi:
         cos_wt = min(max(1.0 - tan_phi / coefficient, -1.0), 1.0)
-        t_s = float(np.arccos(cos_wt)) / omega
+        t_s = math.acos(cos_wt) / omega
         if t_s < t_c:
-            return t_s, "stops_sliding"
-    return t_c, "rebound"
+            return t_s, EXIT_STOPS_SLIDING
+    return t_c, EXIT_REBOUND
+
+
+@njit(cache=True)
+def impact_constants(mu, flow_stress, billet_mass, billet_diameter, angle, tilt):
+    """Height-independent constants of the impact, report Eqs. 2-10 (scalars, compiled).
+
+    The scalar form of :func:`angular_frequency`, :func:`sliding_deceleration_coefficient` and
+    :func:`exit_from_constants`, shared by the full model and the fast tier's kernels.
+
+    Parameters
+    ----------
+    mu : float
+        Apparent friction coefficient [1].
+    flow_stress, billet_mass, billet_diameter : float
+        sigma [Pa], W [kg], D [m].
+    angle, tilt : float
+        phi and psi [deg].
+
+    Returns
+    -------
+    omega : float
+        sqrt(pi sigma D / W) [rad/s].
+    coefficient : float
+        C of Eq. (10) [1].
+    t_exit : float
+        End of heating, min(t_c, t_s) [s].
+    exit_code : int
+        :data:`EXIT_REBOUND` or :data:`EXIT_STOPS_SLIDING`.
+    s, c : float
+        sin(phi) and C cos(phi): V_r / V0 = s - c (1 - cos(omega t)), Eq. (10) [1].
+    """
+    omega = math.sqrt(math.pi * flow_stress * billet_diameter / billet_mass)
+    psi = math.radians(tilt)
+    a_prime = 1.0 - CG_OFFSET_FACTOR * math.cos(psi)
+    b_prime = CG_OFFSET_FACTOR * math.sin(psi)
+    arm = 0.5 * math.hypot(a_prime, b_prime)  # distance from the CG to the contact, per D
+    coefficient = mu + (a_prime * mu + b_prime) * arm / (2.0 * HEMISPHERE_INERTIA_FACTOR)
+    t_exit, exit_code = exit_from_constants(omega, coefficient, angle)
+    phi = math.radians(angle)
+    return omega, coefficient, t_exit, exit_code, math.sin(phi), coefficient * math.cos(phi)
 
 
 def frictional_flux(t, height, mu, angle, tilt, flow_stress, billet_mass, billet_diameter):

@@ -52,6 +52,12 @@ INFO_SIZE = 12
 # BDF2 error -(2/9) h^3 y''', predictor error +h^3 y''' -> 2/11.
 _BDF2_ERROR_CONSTANT = 2.0 / 11.0
 
+#: Default runaway rule: the event is declared when the hottest cell's adiabatic
+#: induction time falls below this fraction of the exit time (:func:`runaway_temperature`).
+#: tests/test_solver.py shows that moving it by decades moves the critical height
+#: by far less than rtol.
+DEFAULT_RUNAWAY_FRACTION = 1e-5
+
 #: Newton's iterations stop when the largest temperature update falls below this fraction
 #: of the step's error tolerance. Newton converges quadratically here, so the error left
 #: is far below the update: 0.1 (was 0.01) moved the event time of the report presets by

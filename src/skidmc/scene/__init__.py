@@ -6,8 +6,7 @@ floats or unit strings (``"28000 psi"``). Every input key is defined once, in
 :mod:`skidmc.scene.keys`.
 """
 
-from skidmc.scene.keys import (CONFIGURATIONS, DESCRIPTIONS, NUMERIC_KEYS, SCENE_KEYS,
-                               SI_UNITS)
+from skidmc.scene.keys import CONFIGURATIONS, DESCRIPTIONS, NUMERIC_KEYS, SCENE_KEYS, SI_UNITS
 from skidmc.scene.presets import PRESETS
 from skidmc.scene.scenes import Scene, SceneColumns, get_preset, list_presets, make_scene
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-
 __all__ = [
     "PAPER_TABLE_III",
     "PAPER_TABLE_IV",

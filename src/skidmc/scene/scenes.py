@@ -21,8 +21,17 @@ from collections.abc import Mapping
 import numpy as np
 
 from skidmc.errors import MissingKeyError, SceneError, UnknownKeyError
-from skidmc.scene.keys import (_BOUNDS, _PARTNER, CONFIGURATIONS, DESCRIPTIONS, NUMERIC_KEYS,
-                               SCENE_KEYS, SI_UNITS, bound_reason, in_bounds)
+from skidmc.scene.keys import (
+    _BOUNDS,
+    _PARTNER,
+    CONFIGURATIONS,
+    DESCRIPTIONS,
+    NUMERIC_KEYS,
+    SCENE_KEYS,
+    SI_UNITS,
+    bound_reason,
+    in_bounds,
+)
 from skidmc.scene.presets import PRESETS
 from skidmc.scene.units import to_si
 

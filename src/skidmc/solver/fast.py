@@ -16,10 +16,25 @@ import operator
 import numpy as np
 
 from skidmc.errors import SceneError
-from skidmc.physics.fast import (_GL_W01, _GL_X01, _G, C_IGNITION, CENSOR_ABOVE, CENSOR_BELOW,
-                                 CENSOR_NONE, ERROR_ESTIMATE, EXIT_REBOUND, EXIT_STOPS_SLIDING,
-                                 MELT_FACTOR, MELT_TABLE, N_TIMES, duhamel_theta,
-                                 fast_height_kernel, fast_heights_kernel, impact_mechanics)
+from skidmc.physics.fast import (
+    _GL_W01,
+    _GL_X01,
+    C_IGNITION,
+    CENSOR_ABOVE,
+    CENSOR_BELOW,
+    CENSOR_NONE,
+    ERROR_ESTIMATE,
+    EXIT_REBOUND,
+    EXIT_STOPS_SLIDING,
+    MELT_FACTOR,
+    MELT_TABLE,
+    N_TIMES,
+    duhamel_theta,
+    fast_height_kernel,
+    fast_heights_kernel,
+)
+from skidmc.physics.mechanics import STANDARD_GRAVITY, impact_constants
+from skidmc.solver.model import build_model
 from skidmc.solver.results import HeightResult
 
 __all__ = [
@@ -62,15 +77,16 @@ def theta_history(scene, n_times=N_TIMES):
     theta : ndarray
         Theta(t) [K/m^0.5]: T_s - T0 = sqrt(H) Theta(t) for an inert HE.
     """
-    omega, t_exit, _, s, c = impact_mechanics(scene.mu, scene.flow_stress, scene.billet_mass,
+    omega, _, t_exit, _, s, c = impact_constants(scene.mu, scene.flow_stress, scene.billet_mass,
                                               scene.billet_diameter, scene.angle, scene.tilt)
     e1 = math.sqrt(scene.he_conductivity * scene.he_density * scene.he_heat_capacity)
     e2 = math.sqrt(scene.target_conductivity * scene.target_density
                    * scene.target_heat_capacity)
     times = t_exit * np.arange(1, n_times + 1) / n_times
     theta = np.empty(n_times)
-    duhamel_theta(scene.mu * scene.flow_stress * math.sqrt(2.0 * _G), s, c, omega, t_exit,
-                  e1 + e2, times, _GL_X01, _GL_W01, theta)
+    flux_per_root_height = scene.mu * scene.flow_stress * math.sqrt(2.0 * STANDARD_GRAVITY)
+    duhamel_theta(flux_per_root_height, s, c, omega, t_exit, e1 + e2, times, _GL_X01, _GL_W01,
+                  theta)
     return times, theta
 
 
@@ -101,32 +117,18 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
     args = list(_scene_values(scene))
     if not melting:
         args[10] = 0.0
-    h, cens, t_exit, ecode, melts = fast_height_kernel(
+    h, cens, t_exit, ecode, _ = fast_height_kernel(
         *args, float(h_min), float(h_max), float(c_ign), float(melt_factor), MELT_TABLE,
         _GL_X01, _GL_W01, N_TIMES)
-    terms, flags = _terms_and_flags(scene, ecode, melts)
     censored = _CENSOR_NAMES[int(cens)]
     height = {"above": h_max, "below": h_min}.get(censored, float(h))
+    # Terms and validity flags (scene and height) as the full tier infers them, without meshes.
+    model = build_model(scene, melting=melting, meshes=False)
     return HeightResult(critical_height=height, censored=censored, evaluations=0,
-                        flags=flags, error_estimate=ERROR_ESTIMATE, rtol=ERROR_ESTIMATE,
-                        level=0.0, method="fast", exit_time=float(t_exit),
-                        exit_kind=_EXIT_NAMES[int(ecode)], terms=terms)
-
-
-def _terms_and_flags(scene, exit_code, melts):
-    """Terms and flags as :func:`skidmc.solver.model.build_model` infers them (without its meshes)."""
-    terms = ["frictional_heating", "friction_spin"]
-    flags = []
-    if scene.tilt > 0.0:
-        terms.append("normal_force_spin")
-    if exit_code == EXIT_STOPS_SLIDING:
-        flags.append("stops_sliding")
-    if scene.mu == 0.0:
-        terms = []
-        flags.append("no_friction")
-    elif melts:
-        terms.append("melting")
-    return tuple(terms), tuple(flags)
+                        flags=model.flags + model.height_flags(height),
+                        error_estimate=ERROR_ESTIMATE, rtol=ERROR_ESTIMATE, level=0.0,
+                        method="fast", exit_time=float(t_exit),
+                        exit_kind=_EXIT_NAMES[int(ecode)], terms=model.terms)
 
 
 def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from skidmc.physics import mechanics
-from skidmc.physics.thermal import runaway_temperature
+from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION, runaway_temperature
 
 #: Integration horizon, in exit times. Beyond the exit the flux is extended (see
 #: :attr:`SkidModel.extension_flux_factor`) only to give the critical-height search
@@ -42,11 +42,6 @@ HORIZON_EXIT_TIMES = 4.0
 #: report presets, results/validation/refinement.md).
 DEPTH_DIFFUSION_LENGTHS = 2.0
 
-#: Default runaway rule: the event is declared when the hottest cell's adiabatic
-#: induction time falls below this fraction of the exit time (see skidmc.thermal).
-#: tests/test_solver.py shows that moving it by decades moves the critical height
-#: by far less than rtol.
-DEFAULT_RUNAWAY_FRACTION = 1e-5
 
 # --- Validity flags (docs/model.md, "Validity flags"). Each marks a scene, or a result, where
 # the report's model is stretched beyond what it can support; the number is still computed.
@@ -304,15 +299,12 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     mass = scene.billet_mass
     diameter = scene.billet_diameter
     mu = scene.mu
-    # omega and C once (each mechanics function would recompute them); t_c as
-    # mechanics.contact_time, the same division.
-    omega = float(mechanics.angular_frequency(sigma, mass, diameter))
+    # The impact's constants from the one compiled definition the fast tier uses too.
+    omega, coefficient, t_exit, exit_code, slide_s, slide_c = mechanics.impact_constants(
+        mu, sigma, mass, diameter, scene.angle, scene.tilt)
     t_c = 0.5 * math.pi / omega
-    coefficient = float(mechanics.sliding_deceleration_coefficient(mu, scene.tilt))
-    t_exit, exit_kind = mechanics.exit_from_constants(omega, coefficient, scene.angle)
+    exit_kind = mechanics.EXIT_KINDS[exit_code]
     phi = math.radians(scene.angle)
-    slide_s = math.sin(phi)
-    slide_c = coefficient * math.cos(phi)
 
     terms = ["frictional_heating", "friction_spin"]
     flags = []
@@ -353,7 +345,8 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
 
     latent = scene.he_heat_of_fusion if melting else 0.0
     if latent > 0.0 and scene.he_melting_point < t_run:
-        terms.append("melting")
+        if mu > 0.0:  # without friction nothing heats, so nothing melts
+            terms.append("melting")
     else:
         latent = 0.0
 

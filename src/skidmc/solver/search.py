@@ -21,11 +21,24 @@ import time
 
 from skidmc.errors import SceneError
 from skidmc.solver.model import build_model
-from skidmc.solver.plan import (extrapolated_error, melt_bias, melt_width_for_rtol, modelled_error,
-                                plan_for_rtol, root_tolerance)
+from skidmc.solver.plan import (
+    extrapolated_error,
+    melt_bias,
+    melt_width_for_rtol,
+    modelled_error,
+    plan_for_rtol,
+    root_tolerance,
+)
 from skidmc.solver.results import HeightResult
-from skidmc.solver.roots import (FAST_GUESS_ERROR, bisection_root, brent_root, go_side_root,
-                                 go_side_slope, guided_root, margin_slope)
+from skidmc.solver.roots import (
+    FAST_GUESS_ERROR,
+    bisection_root,
+    brent_root,
+    go_side_root,
+    go_side_slope,
+    guided_root,
+    margin_slope,
+)
 from skidmc.solver.simulate import simulate
 
 __all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "TIERS", "critical_height"]
@@ -75,7 +88,7 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     melting : bool
         Model melting of the HE.
     runaway_fraction : float, optional
-        Override the runaway rule (:data:`skidmc.solver.model.DEFAULT_RUNAWAY_FRACTION`).
+        Override the runaway rule (:data:`skidmc.physics.thermal.DEFAULT_RUNAWAY_FRACTION`).
     h_guess : float, optional
         First height tried [m].
     model : SkidModel, optional
@@ -96,11 +109,7 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     if tier == "fast":
         from skidmc.solver.fast import fast_critical_height
 
-        res = fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
-        # The same validity flags as the full tier (scene and height), without its meshes.
-        model = build_model(scene, melting=melting, meshes=False)
-        res.flags = model.flags + model.height_flags(res.critical_height)
-        return res
+        return fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
     if not (isinstance(rtol, (int, float)) and 0.0 < rtol < 0.5):
         raise SceneError("rtol", rtol, "must be a number in (0, 0.5)")
     if method not in ("brent", "bisection"):

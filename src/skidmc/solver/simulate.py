@@ -8,9 +8,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skidmc.physics.thermal import (INFO_EVENT, INFO_FAILED, INFO_REJECTED, INFO_STEPS,
-                                    INFO_T_EVENT, INFO_T_EXIT_MAX, INFO_T_MAX, INFO_Y_EXIT_MAX,
-                                    simulate_kernel)
+from skidmc.physics.thermal import (
+    INFO_EVENT,
+    INFO_FAILED,
+    INFO_REJECTED,
+    INFO_STEPS,
+    INFO_T_EVENT,
+    INFO_T_EXIT_MAX,
+    INFO_T_MAX,
+    INFO_Y_EXIT_MAX,
+    simulate_kernel,
+)
 
 __all__ = ["MAX_STEPS", "Simulation", "SolverError", "simulate"]
 
