@@ -13,8 +13,8 @@ import types
 import pytest
 
 from skidmc.cli import main
-from skidmc.scene.presets import PRESETS
 from skidmc.scene import SCENE_KEYS
+from skidmc.scene.presets import PRESETS
 
 FT = 0.3048  # m, exact
 

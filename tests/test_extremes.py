@@ -32,9 +32,9 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from skidmc.physics import mechanics
-from skidmc.solver.model import build_model
 from skidmc.scene import make_scene
 from skidmc.solver import critical_height, simulate
+from skidmc.solver.model import build_model
 
 RTOL = 1e-2
 H_MIN = 0.01     # [m] 1 cm

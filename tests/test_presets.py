@@ -12,6 +12,7 @@ import itertools
 import pytest
 
 from skidmc.errors import SceneError
+from skidmc.scene import SCENE_KEYS, Scene, get_preset, list_presets
 from skidmc.scene.presets import (
     PAPER_TABLE_III,
     PAPER_TABLE_IV,
@@ -19,7 +20,6 @@ from skidmc.scene.presets import (
     PAPER_TABLE_VIII,
     PRESETS,
 )
-from skidmc.scene import SCENE_KEYS, Scene, get_preset, list_presets
 
 INCH = 0.0254
 LB = 0.45359237

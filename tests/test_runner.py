@@ -22,15 +22,14 @@ import numpy as np
 import pytest
 import xarray as xr
 
-
+from skidmc.cli import _cmd_run as main_run
 from skidmc.ensemble import evaluate as evaluate_module
 from skidmc.ensemble import executors, schedule
-from skidmc.scene import get_preset
-from skidmc.cli import _cmd_run as main_run
 from skidmc.ensemble.batch import evaluate_batch
 from skidmc.ensemble.run import execute_study, run_study
 from skidmc.ensemble.storage import StorageError, inspect_file
 from skidmc.ensemble.study import SolverOptions
+from skidmc.scene import get_preset
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import scipy.stats
 
-
 from skidmc.ensemble.sampling import (
     MC_BLOCK,
     StudySampler,

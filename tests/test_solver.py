@@ -5,15 +5,23 @@ import math
 import pytest
 
 from skidmc.errors import SceneError
-from skidmc.scene import get_preset
+from skidmc.scene import get_preset, make_scene
 from skidmc.scene.presets import PAPER_TABLE_VIII
-from skidmc.scene import make_scene
-from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
 from skidmc.solver import critical_height
-from skidmc.solver.plan import (DISCRETISATION_SHARE, ERROR_LEVEL0, MAX_MELT_WIDTH, MELT_SHARE,
-                                ROOT_SHARE, extrapolated_error, level_for_rtol,
-                                melt_width_for_rtol, modelled_error, plan_for_rtol,
-                                root_tolerance)
+from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
+from skidmc.solver.plan import (
+    DISCRETISATION_SHARE,
+    ERROR_LEVEL0,
+    MAX_MELT_WIDTH,
+    MELT_SHARE,
+    ROOT_SHARE,
+    extrapolated_error,
+    level_for_rtol,
+    melt_width_for_rtol,
+    modelled_error,
+    plan_for_rtol,
+    root_tolerance,
+)
 from skidmc.solver.roots import CARRIED_GO_SLOPE_ERROR
 
 FT = 0.3048

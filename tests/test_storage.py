@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 import xarray as xr
 
-
 from skidmc.ensemble.storage import (
     FORMAT,
     EnsembleFile,

@@ -23,15 +23,14 @@ import numpy as np
 import pytest
 import scipy.stats
 
-
 from skidmc import errors
-from skidmc.scene import get_preset
 from skidmc.ensemble.study import (
     RATE_AT_REFERENCE,
     StudyError,
     load_study,
     parse_study,
 )
+from skidmc.scene import get_preset
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted((ROOT / "studies").glob("*.toml"))

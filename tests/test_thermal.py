@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from skidmc.solver.model import build_model, geometric_widths
 from skidmc.scene import get_preset
 from skidmc.solver import simulate
+from skidmc.solver.model import build_model, geometric_widths
 
 
 def effusivity(k, rho, c):

@@ -2,13 +2,15 @@
 
 Critical drop heights of hemispherical billets sliding on a target (Los Alamos report "Effect of
 Target Thermal Conductivity and Roughness on the Initiation of PBX 9404 by Oblique Impact"),
-ensembles over uncertain inputs, sensitivity and hazard. See ``docs/architecture.md``.
+ensembles over uncertain inputs, their analysis (go-probability curves, sensitivity, hazard).
+See ``docs/architecture.md`` for the layers.
 
-The scene layer is re-exported here lazily, so that importing a kernel module
-(``skidmc.mechanics``) does not pay for pint::
+The front door: the names a user needs, resolved on first use (PEP 562), so that ``import
+skidmc`` stays fast and importing a kernel module does not pay for pint, scipy.stats or h5py::
 
     >>> import skidmc
     >>> scene = skidmc.make_scene(preset="paper-quartz", mu="0.1")
+    >>> skidmc.critical_height(scene, rtol=1e-2).critical_height  # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -23,31 +25,28 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 
 # name -> module that defines it; resolved on first attribute access (PEP 562)
 _LAZY = {
+    # scenes
     "Scene": "skidmc.scene",
     "make_scene": "skidmc.scene",
-    "SCENE_KEYS": "skidmc.scene",
-    "SI_UNITS": "skidmc.scene",
     "get_preset": "skidmc.scene",
     "list_presets": "skidmc.scene",
+    "SCENE_KEYS": "skidmc.scene",
+    "SI_UNITS": "skidmc.scene",
+    # solver
+    "critical_height": "skidmc.solver",
+    "HeightResult": "skidmc.solver",
+    # ensembles
+    "load_study": "skidmc.ensemble.study",
+    "run_study": "skidmc.ensemble.run",
+    "evaluate_batch": "skidmc.ensemble.batch",
+    # errors
     "SkidmcError": "skidmc.errors",
     "SceneError": "skidmc.errors",
     "UnknownKeyError": "skidmc.errors",
     "UnitError": "skidmc.errors",
 }
 
-__all__ = [  # noqa: RUF022 (grouped as in _LAZY)
-    "__version__",
-    "Scene",
-    "make_scene",
-    "SCENE_KEYS",
-    "SI_UNITS",
-    "get_preset",
-    "list_presets",
-    "SkidmcError",
-    "SceneError",
-    "UnknownKeyError",
-    "UnitError",
-]
+__all__ = ["__version__", *_LAZY]  # noqa: PLE0604 (names resolved by __getattr__)
 
 
 def __getattr__(name: str):

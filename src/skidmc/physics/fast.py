@@ -86,13 +86,24 @@ import numpy as np
 from numba import njit
 from scipy.special import erfc
 
-from skidmc.physics.mechanics import (  # noqa: F401 (re-exported)
-    EXIT_REBOUND,
-    EXIT_STOPS_SLIDING,
-    STANDARD_GRAVITY,
-    impact_constants,
-)
+from skidmc.physics.mechanics import STANDARD_GRAVITY, impact_constants
 from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION
+
+__all__ = [
+    "CENSOR_ABOVE",
+    "CENSOR_BELOW",
+    "CENSOR_NONE",
+    "C_IGNITION",
+    "ERROR_ESTIMATE",
+    "MELT_FACTOR",
+    "MELT_TABLE",
+    "N_GAUSS",
+    "N_TIMES",
+    "duhamel_theta",
+    "fast_height_kernel",
+    "fast_heights_kernel",
+    "melt_depression",
+]
 
 #: Number of uniform times in (0, t_exit] on which Theta and the induction integral are taken.
 N_TIMES = 32
@@ -339,7 +350,7 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
     t_exit : float
         End of heating [s].
     exit_code : int
-        :data:`EXIT_REBOUND` or :data:`EXIT_STOPS_SLIDING`.
+        :data:`skidmc.physics.mechanics.EXIT_REBOUND` or ``EXIT_STOPS_SLIDING``.
     melting : bool
         Whether melting was modelled.
     """

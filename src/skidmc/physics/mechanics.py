@@ -27,6 +27,33 @@ import math
 import numpy as np
 from numba import njit
 
+__all__ = [
+    "CG_OFFSET_FACTOR",
+    "EXIT_KINDS",
+    "EXIT_REBOUND",
+    "EXIT_STOPS_SLIDING",
+    "HEMISPHERE_INERTIA_FACTOR",
+    "STANDARD_GRAVITY",
+    "angular_frequency",
+    "contact_area",
+    "contact_time",
+    "exit_from_constants",
+    "exit_time",
+    "flow_stress_from_contact_diameter",
+    "friction_from_spin",
+    "frictional_flux",
+    "impact_constants",
+    "impact_speed",
+    "max_contact_diameter",
+    "moment_arm_terms",
+    "normal_deformation",
+    "normal_impact_speed",
+    "sliding_deceleration_coefficient",
+    "sliding_velocity",
+    "spin_after_rebound",
+    "stop_time",
+]
+
 #: Standard gravity [m/s^2] (the report's g in the drop velocity V0 = sqrt(2 g H)).
 STANDARD_GRAVITY = 9.80665
 

@@ -33,6 +33,30 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+__all__ = [
+    "COLD_SOURCE_FRACTION",
+    "DEFAULT_RUNAWAY_FRACTION",
+    "INFO_EVENT",
+    "INFO_FAILED",
+    "INFO_NEWTON_FAILURES",
+    "INFO_NEWTON_ITERATIONS",
+    "INFO_REJECTED",
+    "INFO_SIZE",
+    "INFO_STEPS",
+    "INFO_T_EVENT",
+    "INFO_T_EXIT_MAX",
+    "INFO_T_FINAL",
+    "INFO_T_MAX",
+    "INFO_Y_EXIT_MAX",
+    "INFO_Y_MAX",
+    "NEWTON_TOLERANCE_FRACTION",
+    "RETRY_SAFETY",
+    "STEP_SAFETY",
+    "adiabatic_induction_time",
+    "runaway_temperature",
+    "simulate_kernel",
+]
+
 # Indices into the info array returned by :func:`simulate_kernel`.
 INFO_EVENT = 0          # 1.0 when a thermal event occurred before t_end
 INFO_T_EVENT = 1        # event time [s] (inf when none)

@@ -24,8 +24,6 @@ from skidmc.physics.fast import (
     CENSOR_BELOW,
     CENSOR_NONE,
     ERROR_ESTIMATE,
-    EXIT_REBOUND,
-    EXIT_STOPS_SLIDING,
     MELT_FACTOR,
     MELT_TABLE,
     N_TIMES,
@@ -33,7 +31,12 @@ from skidmc.physics.fast import (
     fast_height_kernel,
     fast_heights_kernel,
 )
-from skidmc.physics.mechanics import STANDARD_GRAVITY, impact_constants
+from skidmc.physics.mechanics import (
+    EXIT_REBOUND,
+    EXIT_STOPS_SLIDING,
+    STANDARD_GRAVITY,
+    impact_constants,
+)
 from skidmc.solver.model import build_model
 from skidmc.solver.results import HeightResult
 

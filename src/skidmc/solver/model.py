@@ -27,6 +27,26 @@ import numpy as np
 from skidmc.physics import mechanics
 from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION, runaway_temperature
 
+__all__ = [
+    "BASE_RESOLUTION",
+    "CRUSH_DEPTH_FRACTION",
+    "DEPTH_DIFFUSION_LENGTHS",
+    "EARLY_STOP_FRACTION",
+    "HORIZON_EXIT_TIMES",
+    "HOT_IGNITION_TEMPERATURE",
+    "LONG_SLIDE_DIAMETERS",
+    "MELT_WIDTH_BIAS_PER_K",
+    "MELT_WIDTH_LEVEL0",
+    "Resolution",
+    "SELF_HEATING_TIME",
+    "SkidModel",
+    "build_model",
+    "estimated_reaction_zone",
+    "geometric_widths",
+    "melt_width_floor",
+    "resolution_for_level",
+]
+
 #: Integration horizon, in exit times. Beyond the exit the flux is extended (see
 #: :attr:`SkidModel.extension_flux_factor`) only to give the critical-height search
 #: a continuous margin; the go/no-go verdict only looks at events before t_exit.
