@@ -93,8 +93,8 @@ if __name__ == "__main__":
 def batch_scenes(n_scenes: int):
     """The first samples of paper-series1 as `n_scenes` Scene objects, scenes interleaved."""
     from skidmc.ensemble.sampling import StudySampler
-    from skidmc.scene import SI_UNITS, make_scene
     from skidmc.ensemble.study import load_study
+    from skidmc.scene import SI_UNITS, make_scene
 
     study = load_study(STUDY)
     per = -(-n_scenes // len(study.scenes))

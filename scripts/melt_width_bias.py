@@ -17,9 +17,9 @@ import argparse
 import csv
 from pathlib import Path
 
-from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K
 from skidmc.scene import make_scene
 from skidmc.solver import critical_height
+from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
 WIDTHS = [0.125, 0.25, 0.5, 1.0, 2.0, 4.0]

@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from skidmc.scene.presets import PAPER_TABLE_IX
 from skidmc.scene import make_scene
-from skidmc.solver import critical_height
+from skidmc.scene.presets import PAPER_TABLE_IX
 from skidmc.scene.units import from_si
+from skidmc.solver import critical_height
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
 RTOL = 2e-3  # 0.2 %: far below the 15 % offset being explained

@@ -16,8 +16,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from skidmc.scene.presets import PAPER_TABLE_VIII, PAPER_TABLE_IX  # noqa: E402
 from skidmc.scene import make_scene  # noqa: E402
+from skidmc.scene.presets import PAPER_TABLE_IX, PAPER_TABLE_VIII  # noqa: E402
 from skidmc.solver import critical_height  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
