@@ -137,11 +137,11 @@ def _check_outputs(Y, k: int, second_order: bool, name: str = "Y") -> np.ndarray
                          f"has {k} rows per base row with second_order={second_order})")
     bad = np.flatnonzero(~np.isfinite(y))
     if bad.size:
-        raise ValueError(f"{name}[{bad[0]}] = {y[bad[0]]!r} ({bad.size} non-finite values): "
-                         "choose a policy with prepare_output first")
+        raise ValueError(f"{name}[{bad[0]}] = {float(y[bad[0]])!r} ({bad.size} non-finite "
+                         "values): choose a policy with prepare_output first")
     if np.ptp(y) == 0.0:
-        raise ValueError(f"{name} is constant ({y[0]!r}): the output variance is 0 and the "
-                         "indices are undefined")
+        raise ValueError(f"{name} is constant ({float(y[0])!r}): the output variance is 0 and "
+                         "the indices are undefined")
     return y.reshape(-1, k)
 
 
@@ -683,8 +683,8 @@ def prepare_output(heights, status, *, policy: str | None = None, h_max: float |
     bad_height = ~failed & ~(np.isfinite(h) & (h > 0))
     if np.any(bad_height):
         i = np.flatnonzero(bad_height)[0]
-        raise ValueError(f"heights[{i}] = {h[i]!r} with status {st[i]!r}: expected a finite "
-                         "height > 0 (NaN is only for failed rows)")
+        raise ValueError(f"heights[{i}] = {float(h[i])!r} with status {str(st[i])!r}: expected "
+                         "a finite height > 0 (NaN is only for failed rows)")
     capping = policy in ("cap", "cap+drop")
     dropping = policy in ("drop", "cap+drop")
     if np.any(failed) and not dropping:
@@ -704,8 +704,8 @@ def prepare_output(heights, status, *, policy: str | None = None, h_max: float |
         short = above & (h < h_max)
         if np.any(short):
             i = np.flatnonzero(short)[0]
-            raise ValueError(f"h_max = {h_max!r}: above the bound {h[i]!r} [m] of the censored "
-                             f"row {i}, so min(H, h_max) is unknown there; use h_max <= "
+            raise ValueError(f"h_max = {h_max!r}: above the bound {float(h[i])!r} [m] of the "
+                             f"censored row {i}, so min(H, h_max) is unknown there; use h_max <= "
                              f"{float(h[short].min())!r}")
         capped = ~failed & (h > h_max)
         above = above | capped
@@ -766,8 +766,8 @@ def event_indicator(heights, drop_height: float, status=None) -> np.ndarray:
         raise ValueError(f"drop_height = {drop_height!r}: expected a finite height > 0 [m]")
     bad = np.flatnonzero(~np.isfinite(h))
     if bad.size:
-        raise ValueError(f"heights[{bad[0]}] = {h[bad[0]]!r}: failed rows must be dropped first "
-                         "(prepare_output with policy 'drop')")
+        raise ValueError(f"heights[{bad[0]}] = {float(h[bad[0]])!r}: failed rows must be dropped "
+                         "first (prepare_output with policy 'drop')")
     if status is not None:
         st = np.asarray(status).astype(str).reshape(-1)
         if st.shape != h.shape:
@@ -776,8 +776,8 @@ def event_indicator(heights, drop_height: float, status=None) -> np.ndarray:
                      | ((st == "censored_below") & (h > drop_height)) | (st == "failed"))
         if np.any(undecided):
             i = np.flatnonzero(undecided)[0]
-            raise ValueError(f"heights[{i}] = {h[i]!r} ({st[i]}): the event at drop_height = "
-                             f"{drop_height!r} is undecided for this row")
+            raise ValueError(f"heights[{i}] = {float(h[i])!r} ({st[i]}): the event at "
+                             f"drop_height = {drop_height!r} is undecided for this row")
     return (h <= drop_height).astype(float)
 
 
@@ -830,7 +830,7 @@ def morris_screening(problem: dict, X, Y, *, num_levels: int = 4, confidence: fl
                          f"a multiple of {len(index_names) + 1}")
     if not np.all(np.isfinite(y)):
         i = np.flatnonzero(~np.isfinite(y))[0]
-        raise ValueError(f"Y[{i}] = {y[i]!r}: outputs must be finite")
+        raise ValueError(f"Y[{i}] = {float(y[i])!r}: outputs must be finite")
     # SALib's morris.analyze adds a 'groups' key to the problem it is given: pass a copy.
     si = morris.analyze(copy.deepcopy(problem), x, y, num_resamples=resamples,
                         conf_level=confidence, num_levels=num_levels, seed=seed, scaled=scaled)
