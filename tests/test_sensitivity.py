@@ -176,9 +176,14 @@ def test_intervals_agree_with_scipy_bootstrap_on_the_same_replicates():
         return np.moveaxis(sens._indices_from_means(features[rows].mean(axis=-2), layout), -1, 0)
 
     for method in ("BCa", "percentile"):
-        ref = scipy.stats.bootstrap((np.arange(64),), statistic, vectorized=True,
-                                    n_resamples=999, method=method, confidence_level=0.9,
-                                    rng=np.random.default_rng(7))
+        options = {"vectorized": True, "n_resamples": 999, "method": method,
+                   "confidence_level": 0.9}
+        try:
+            ref = scipy.stats.bootstrap((np.arange(64),), statistic,
+                                        rng=np.random.default_rng(7), **options)
+        except TypeError:  # scipy < 1.15 names the generator random_state
+            ref = scipy.stats.bootstrap((np.arange(64),), statistic,
+                                        random_state=np.random.default_rng(7), **options)
         low, high = sens._bootstrap_interval(estimate, ref.bootstrap_distribution.T,
                                              sens._jackknife(features, layout), 0.9,
                                              method.lower())
