@@ -495,6 +495,8 @@ def _coverage(designs, n, reps, seeds, with_salib):
     cover = {m: h / reps for m, h in hits.items()}
     print(f"\ncoverage of 95 % intervals, N = {n}, {reps} reps (S1 x1 x2 x3, ST x1 x2 x3):")
     for m, c in cover.items():
+        if m == "salib normal" and not with_salib:
+            continue
         print(f"  {m:13s} {np.array2string(c, precision=3)}  mean {c.mean():.3f}")
     return cover
 
@@ -534,12 +536,14 @@ def test_coverage_on_salib_sobol_design_fails_for_s1_x3_at_512():
     """Known limitation (documented): at N = 512 SALib's Sobol' design gives S1 of x3 (exactly
     0) a scramble-to-scramble spread larger than the bootstrap's, and its intervals under-cover.
 
-    Measured 0.825-0.84 in exploration (200 reps); we check < 0.9 (4 s.e. below 0.95 at 200
-    reps), so the documentation's warning stays true while the other indices over-cover.
+    Measured 0.825-0.84 in exploration (seeds 1000-1199, 3000-3199) and 0.895 on the first 200
+    seeds of this range; 400 reps measure the coverage to +-0.017 (1 s.e. at 0.87), and we check
+    < 0.92, about 3 s.e. below nominal, so the documentation's warning stays true while the other
+    indices over-cover.
     """
     n = 512
-    cover = _coverage(lambda s: design(PROBLEM, n, seed=s), n, 200, range(30_000, 30_200),
+    cover = _coverage(lambda s: design(PROBLEM, n, seed=s), n, 400, range(30_000, 30_400),
                       with_salib=False)
     for method in ("bca", "percentile"):
-        assert cover[method][2] < 0.9, method
+        assert cover[method][2] < 0.92, method
         assert np.all(np.delete(cover[method], 2) >= 0.93), method
