@@ -470,8 +470,8 @@ def sobol_convergence(problem: dict, Y, n_values: Sequence[int] | None = None,
     Returns
     -------
     xarray.Dataset
-        As :func:`sobol_indices`, with an ``N`` dimension first, plus ``stable``-ready
-        intervals; attribute ``N`` is the largest.
+        The variables of :func:`sobol_indices` with an ``N`` dimension first (coordinate: the
+        base-row counts); attribute ``N`` is the design's total.
     """
     k = rows_per_base_row(problem, second_order)
     blocks = _check_outputs(Y, k, bool(second_order))
