@@ -724,7 +724,9 @@ def _design_point(limit_state, start, gradient_step, scale):
                     "jac": lambda u: value_and_gradient(u)[1],
                 }
             ],
-            options={"maxiter": 100, "ftol": 1e-8},
+            # ftol 1e-6 of 0.5 beta^2 (5-20 for rare events) pins beta far below the
+            # finite-difference error; tighter, SLSQP spends its iterations chasing that error.
+            options={"maxiter": 100, "ftol": 1e-6},
         )
     u_star = np.asarray(result.x, dtype=float)
     value = value_and_gradient(u_star)[0] if np.all(np.isfinite(u_star)) else math.nan
@@ -776,7 +778,11 @@ def _form_importance_sampling(
         probe_values = limit_state((beta + 1.0) * directions)
         order = np.argsort(probe_values)
         candidates = [directions[i] for i in order if probe_values[i] <= 0]
-        while candidates and len(design_points) < max_design_points:
+        # Each extra search may fail or slide back to a known branch: cap them so a ragged
+        # failure domain cannot spend the budget on searches.
+        searches_left = 2 * max_design_points
+        while candidates and len(design_points) < max_design_points and searches_left > 0:
+            searches_left -= 1
             known = np.array(design_points)
             candidates = [
                 c for c in candidates if _angle_cosines(c[np.newaxis], known).max() < cos_branch
