@@ -319,17 +319,20 @@ class RareEventResult:
     warnings: tuple[str, ...] = ()
 
 
-def _lognormal_interval(probability: float, cov: float) -> tuple[float, float]:
-    """Interval of a positive estimator taken as log-normal with the given mean and CoV."""
+def _lognormal_interval(
+    probability: float, cov: float, quantile: float = _Z_INTERVAL
+) -> tuple[float, float]:
+    """Interval of a positive estimator taken as log-normal with the given mean and CoV.
+
+    `quantile` is the two-sided quantile of log(estimate) (1.96 for 95 %, or a Student-t one
+    when the CoV comes from a few replications).
+    """
     if not (probability > 0 and math.isfinite(cov)):
         return (0.0, 1.0)
     sigma = math.sqrt(math.log1p(cov * cov))
     # The log-normal with mean p and CoV c has median p / sqrt(1 + c^2).
     median = probability / math.sqrt(1.0 + cov * cov)
-    return (
-        median * math.exp(-_Z_INTERVAL * sigma),
-        min(1.0, median * math.exp(_Z_INTERVAL * sigma)),
-    )
+    return (median * math.exp(-quantile * sigma), min(1.0, median * math.exp(quantile * sigma)))
 
 
 def _normal_interval(probability: float, standard_error: float) -> tuple[float, float]:
@@ -582,19 +585,25 @@ def _subset_run(limit_state, rng, run, samples_per_level, p0, budget, proposal_s
     }
 
 
-def _averaged_runs_cov(runs: list[dict]) -> float:
-    """CoV of the average of independent subset-simulation runs.
+def _averaged_runs_cov(runs: list[dict]) -> tuple[float, float]:
+    """CoV of the average of independent subset-simulation runs, and its interval quantile.
 
     Each run's relative variance is Au & Beck's sum over levels, which neglects the correlation
     between the levels' estimates (the seeds of a level come from the chains of the one before)
     and so runs low: measured on the 10-d linear limit state, 0.24 stated against 0.27 observed
-    at 3 levels, 0.33 against 0.47 at 6. With two or more runs their spread is an unbiased
-    (if noisy) estimate of the same relative variance; the larger of the two is used.
+    at 3 levels, 0.33 against 0.47 at 6; on the four-branch system 0.095 against 0.111 for the
+    average of ~8 runs. With two or more runs their spread is an unbiased but noisy estimate of
+    the same relative variance: the larger of the two is used, and the interval takes the
+    Student-t quantile with R - 1 degrees of freedom for the noise of the spread (measured
+    coverage of the nominal 95 %: 0.96 on the four-branch system, 0.99 on the linear state).
     """
     estimates = np.array([r["probability"] for r in runs])
     formula = float(np.mean([r["cov"] ** 2 for r in runs]))
-    spread = float(estimates.var(ddof=1) / estimates.mean() ** 2) if len(runs) > 1 else 0.0
-    return math.sqrt(max(formula, spread) / len(runs))
+    if len(runs) == 1:
+        return math.sqrt(formula), _Z_INTERVAL
+    spread = float(estimates.var(ddof=1) / estimates.mean() ** 2)
+    quantile = float(stats.t.ppf(0.5 + CONFIDENCE / 2, len(runs) - 1))
+    return math.sqrt(max(formula, spread) / len(runs)), quantile
 
 
 def _subset_simulation(
@@ -668,16 +677,16 @@ def _subset_simulation(
         run["levels"][-1]["run_probability"] = run["probability"]
         run["levels"][-1]["run_cov"] = run["cov"]
         largest_run_cost = max(largest_run_cost, run["evaluations"])
-        cov = _averaged_runs_cov(runs)
+        cov, _ = _averaged_runs_cov(runs)
         if cov <= target_cov:
             reason = f"target CoV {target_cov} reached ({len(runs)} runs)"
             break
     probability = float(np.mean([r["probability"] for r in runs]))
-    cov = _averaged_runs_cov(runs)
+    cov, quantile = _averaged_runs_cov(runs)
     return {
         "probability": probability,
         "cov": cov,
-        "interval": _lognormal_interval(probability, cov),
+        "interval": _lognormal_interval(probability, cov, quantile),
         "converged": cov <= target_cov,
         "stop_reason": reason,
         "history": history,
