@@ -401,9 +401,9 @@ def test_profile_interval_coverage_on_simulated_updown_sequences():
     """Coverage of the 95 % H50 interval over up-down sequences of N = 10-30 drops.
 
     Seed, truth and design drawn here were not used while writing the code (development used
-    other seeds). Measured (seed 20240611, 2000 sequences): profile 0.949 where the MLE exists
-    (1330 sequences), Wald 0.905 on the same sequences; where the outcomes do not overlap (the
-    other third) the likelihood-ratio set from the supremum covers only 0.82 (documented).
+    other seeds). Measured (seed 20240611, 2000 sequences): profile 0.959 where the MLE exists
+    (1381 sequences), Wald 0.913 on the same sequences; where the outcomes do not overlap (the
+    other 619) the likelihood-ratio set from the supremum covers only 0.837 (documented).
     """
     rng = np.random.default_rng(20240611)
     mu, sigma = math.log(10.0), 0.2
@@ -438,7 +438,10 @@ def test_profile_interval_coverage_on_simulated_updown_sequences():
 
 @pytest.mark.slow
 def test_lognormal_interval_coverage_with_censoring():
-    """95 % profile intervals of H50, H10 and sigma from 30 samples, ~25 % censored."""
+    """95 % profile intervals of H50, H10 and sigma from 30 samples, ~25 % censored.
+
+    Measured (seed 99, 600 samples): H50 0.948, H10 0.950, sigma 0.953.
+    """
     rng = np.random.default_rng(99)
     mu, sigma, reps = math.log(20.0), 0.3, 600
     hits = {"h50": 0, "h10": 0, "sigma": 0}
