@@ -1040,7 +1040,9 @@ def fit_lognormal(
         rng = np.random.default_rng(seed)
         if fit.n_exact == fit.n:
             result = stats.goodness_of_fit(
-                stats.norm, log_h, statistic="filliben", n_mc_samples=int(n_bootstrap), rng=rng
+                # random_state (not rng, which needs scipy >= 1.15) keeps scipy 1.11+ working
+                stats.norm, log_h, statistic="filliben", n_mc_samples=int(n_bootstrap),
+                random_state=rng,
             )
             p_value = float(result.pvalue)
             method = "Filliben PPCC, Monte Carlo null (scipy.stats.goodness_of_fit)"
