@@ -113,3 +113,43 @@ def test_table_ix_second_series():
 def test_bad_arguments(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+# --- experiments a study scene refers to ---------------------------------------------------------
+
+
+def test_every_experiment_loads_with_its_source():
+    from skidmc.analysis.experiments import EXPERIMENTS, get_experiment
+
+    for name in EXPERIMENTS:
+        exp = get_experiment(name)
+        assert exp.name == name and "Table" in exp.source
+        assert exp.h50 > 0.0
+
+
+def test_first_series_experiments_join_drops_and_table_ii():
+    from skidmc.analysis.experiments import get_experiment
+
+    quartz = get_experiment("quartz")
+    # Table III: ten drops, four events; Table II: 1.8 ft by the up-down method.
+    assert len(quartz.drops) == 10 and quartz.drops.went.sum() == 4
+    assert (quartz.h50, quartz.h50_qualifier) == (1.8, "updown")
+    gold = get_experiment("gold", units="m")
+    assert gold.h50_qualifier == "lower_bound" and not gold.drops.went.any()
+    assert gold.h50 == pytest.approx(150 * 0.3048, rel=1e-15)
+
+
+def test_second_series_experiments_follow_table_ix_order():
+    from skidmc.analysis.experiments import get_experiment
+
+    rows = [get_experiment(f"series2_{i}") for i in range(1, 6)]
+    assert [r.h50 for r in rows] == [4.8, 1.8, 2.4, 0.5, 0.7]  # Table IX as printed
+    assert all(r.drops is None for r in rows)
+    assert "mu = 0.243" in rows[-1].description
+
+
+def test_unknown_experiment_lists_the_known_ones():
+    from skidmc.analysis.experiments import get_experiment
+
+    with pytest.raises(ValueError, match="experiment = 'quarts'.*quartz"):
+        get_experiment("quarts")

@@ -23,8 +23,11 @@ from scipy.constants import foot
 
 __all__ = [
     "DROP_SERIES",
+    "EXPERIMENTS",
     "TABLES",
     "DropSeries",
+    "Experiment",
+    "get_experiment",
     "experimental_h50",
     "load_drops",
     "measured_friction",
@@ -316,3 +319,82 @@ def second_series(units: str = "ft") -> xr.Dataset:
         coords={"surface": np.arange(1, friction.size + 1)},
         attrs={"source": _source(comments9) + " " + _source(comments1)},
     )
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """What the report measured for one target and finish: its drops and its 50 % height.
+
+    Attributes
+    ----------
+    name : str
+        A key of :data:`EXPERIMENTS`.
+    description : str
+    drops : DropSeries or None
+        The individual drops, where the report lists them (first series only).
+    h50 : float
+        The report's experimental 50 % height [``units``] (NaN where none is given).
+    h50_qualifier : str
+        "updown" (Dixon-Mood on the drops), "approximate" (too few drops), "lower_bound" (no event
+        up to this height) or "" (second series: as printed in Table IX).
+    units : str
+        "ft" or "m".
+    source : str
+    """
+
+    name: str
+    description: str
+    drops: DropSeries | None
+    h50: float
+    h50_qualifier: str
+    units: str
+    source: str
+
+
+#: Experiments a study scene can be compared with (``experiment = NAME`` in a study's scene):
+#: the first series' targets (Tables II-IV and the gold drops) and the second series' five
+#: quartz finishes (Table IX, by friction coefficient, in the printed order).
+EXPERIMENTS = {
+    "quartz": "first series, fused quartz (Table III drops, Table II 50 % height)",
+    "alumina_20_35": "first series, 85 % alumina, 20-35 uin (Table IV drops 4-12, Table II)",
+    "alumina_50_80": "first series, 85 % alumina, 50-80 uin (Table IV drops 1-3, Table II)",
+    "gold": "first series, gold on a 45 deg target (no event at 25-150 ft, Sec. IV)",
+    **{f"series2_{i}": f"second series, quartz finish {i} (Table IX row {i})"
+       for i in range(1, 6)},
+}
+
+
+def get_experiment(name: str, units: str = "ft") -> Experiment:
+    """The drops and 50 % height the report gives for one target and finish.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`EXPERIMENTS`.
+    units : {"ft", "m"}, optional
+        Unit of the heights.
+
+    Returns
+    -------
+    Experiment
+
+    Raises
+    ------
+    ValueError
+        An unknown name (the message lists the known ones) or unit.
+    """
+    if name not in EXPERIMENTS:
+        raise ValueError(f"experiment = {name!r}: choose from {', '.join(EXPERIMENTS)}")
+    if name.startswith("series2_"):
+        table = second_series(units)
+        row = table.isel(surface=int(name.split("_")[1]) - 1)
+        description = (f"{EXPERIMENTS[name]}: mu = {float(row.friction):g}, "
+                       f"{row.surface_treatment.item()}")
+        return Experiment(name, description, None, float(row.h50_experimental), "",
+                          units, table.attrs["source"])
+    table = experimental_h50(units)
+    h50 = table.sel(target=name)
+    drops = load_drops(name, units=units)
+    return Experiment(name, EXPERIMENTS[name], drops, float(h50.h50_experimental),
+                      str(h50.qualifier.item()), units,
+                      f"drops: {drops.source}; 50 % heights: {table.attrs['source']}")
