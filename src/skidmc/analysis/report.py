@@ -1,0 +1,688 @@
+"""What a user runs a study for: go-probability curves, log-normal fits, the experiments' verdict.
+
+Reads an ensemble (the Dataset of :func:`skidmc.analysis.open_ensemble`) and answers, per scene:
+
+* P(go | H): the empirical distribution of the critical heights with a simultaneous band
+  (:func:`~skidmc.analysis.gonogo.go_curve`); a sample censored "above" is a no-go at every height
+  up to its bound;
+* the censored log-normal fit of the critical heights: H50, the log standard deviation, H01, H10,
+  H90 with profile-likelihood intervals, and its goodness-of-fit verdict
+  (:func:`~skidmc.analysis.gonogo.fit_lognormal`);
+* with aleatory and epistemic inputs (a nested design, dims ``epistemic`` x ``sample``): one
+  P(go | H) curve per epistemic draw, their median and 5-95 % band, the H50 of each draw;
+* against the report's drops (:mod:`~skidmc.analysis.experiments`): the probit fit of the drops
+  (profile-likelihood interval, or the bracket the data support when the maximum does not exist),
+  the Dixon-Mood estimate, and scores of the prediction (log-likelihood, Brier and log scores);
+* for a ``saltelli`` design, first-order and total Sobol' indices of ln H_c with bootstrap
+  intervals (:func:`~skidmc.analysis.sensitivity.sobol_indices`).
+
+:func:`write_report` writes the figures, ``summary.md``, ``summary.json`` and the curves (HDF5)
+into a folder. Heights are reported in feet (the report's unit) and metres.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from skidmc.analysis import experiments as experiments_module
+from skidmc.analysis.gonogo import (
+    fit_lognormal,
+    fit_probit,
+    go_curve,
+    plot_go_curve,
+    plot_qq,
+    score_drops,
+    updown,
+)
+
+__all__ = [
+    "FT",
+    "SceneAnalysis",
+    "analyse_ensemble",
+    "analyse_scene",
+    "ensemble_sobol",
+    "scene_outcomes",
+    "write_report",
+]
+
+#: [m per ft], exact.
+FT = 0.3048
+
+#: Censoring marks of the fits, by the ensemble's ``status``.
+_CENSORING = {"ok": "", "censored_above": "above", "censored_below": "below"}
+
+#: Quantiles of the epistemic band [1].
+EPISTEMIC_BAND = (0.05, 0.95)
+
+
+def _scene_names(ds: xr.Dataset) -> list[str]:
+    return [str(s) for s in ds["scene"].values] if "scene" in ds.dims else [ds.attrs.get(
+        "study_name", "scene")]
+
+
+def _select(ds: xr.Dataset, scene: str) -> xr.Dataset:
+    return ds.sel(scene=scene) if "scene" in ds.dims else ds
+
+
+def scene_outcomes(ds: xr.Dataset, scene: str) -> dict:
+    """Critical heights of one scene as the fits take them.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        An ensemble (:func:`skidmc.analysis.open_ensemble`).
+    scene : str
+        A scene name (ignored for a study without scenes).
+
+    Returns
+    -------
+    dict
+        ``heights_m`` [m] (finished, not failed samples, flattened over the sample dims, bounds
+        for censored samples), ``censored`` ("", "above", "below"), and the counts ``n``,
+        ``n_failed``, ``n_unfinished``, ``n_above``, ``n_below``.
+    """
+    sub = _select(ds, scene)
+    height = np.asarray(sub["critical_height"].values, dtype=float).reshape(-1)
+    status = np.asarray(sub["status"].values).astype(str).reshape(-1)
+    unfinished = status == ""
+    failed = status == "failed"
+    keep = ~unfinished & ~failed
+    censored = np.array([_CENSORING[s] for s in status[keep]], dtype=object)
+    return {
+        "heights_m": height[keep],
+        "censored": censored,
+        "n": int(keep.sum()),
+        "n_failed": int(failed.sum()),
+        "n_unfinished": int(unfinished.sum()),
+        "n_above": int((censored == "above").sum()),
+        "n_below": int((censored == "below").sum()),
+    }
+
+
+@dataclass
+class SceneAnalysis:
+    """Everything the report says about one scene. Heights in feet unless named ``_m``.
+
+    Attributes
+    ----------
+    scene : str
+    counts : dict
+        From :func:`scene_outcomes`.
+    curve : xarray.Dataset
+        Empirical P(go | H) on ``grid_ft`` with its simultaneous band (pooled over epistemic
+        draws when there are any: labelled so in its attributes).
+    fit : LognormalFit or None
+        Censored log-normal fit (None with fewer than 3 exact heights).
+    epistemic : xarray.Dataset or None
+        With a nested design: ``p_go`` per epistemic draw on the grid, its median and
+        :data:`EPISTEMIC_BAND`, and ``h50`` per draw [ft].
+    experiment : Experiment or None
+    experimental_fit, updown, scores
+        Probit fit and Dixon-Mood estimate of the experiment's drops, and the prediction's scores
+        against them (None where there are no drops).
+    sobol : xarray.Dataset or None
+        Sobol' indices of ln H_c (``saltelli`` designs).
+    """
+
+    scene: str
+    counts: dict
+    curve: xr.Dataset
+    fit: object | None
+    epistemic: xr.Dataset | None = None
+    experiment: object | None = None
+    experimental_fit: object | None = None
+    updown: object | None = None
+    scores: object | None = None
+    sobol: xr.Dataset | None = None
+    notes: list = field(default_factory=list)
+
+    def predicted_h50(self) -> tuple[float, float, float]:
+        """(estimate, low, high) of the predicted H50 [ft] (the fit's profile interval)."""
+        if self.fit is None:
+            return (math.nan, math.nan, math.nan)
+        return tuple(float(v) for v in self.fit.intervals["h50"])
+
+    def experimental_h50(self) -> tuple[float, float, float]:
+        """(estimate, low, high) of the experimental H50 [ft]: the probit fit of the drops (its
+        bracket when the maximum does not exist), or the report's value alone."""
+        exp = self.experiment
+        if exp is None:
+            return (math.nan, math.nan, math.nan)
+        if exp.h50_qualifier == "lower_bound":
+            return (math.nan, exp.h50, math.inf)
+        fit = self.experimental_fit
+        if fit is None:
+            return (exp.h50, math.nan, math.nan)
+        estimate, low, high = (float(v) for v in fit.quantile(0.5))
+        # Without a maximum (go and no-go heights do not overlap) the likelihood-ratio bounds
+        # still hold; the report's own value stands in for the estimate.
+        return (estimate if fit.exists else exp.h50, low, high)
+
+
+def _grid_ft(heights_ft: np.ndarray, extra=()) -> np.ndarray:
+    finite = heights_ft[np.isfinite(heights_ft) & (heights_ft > 0)]
+    values = np.concatenate([finite, np.asarray(extra, dtype=float)])
+    lo, hi = values.min() / 1.5, values.max() * 1.5
+    return np.unique(np.concatenate([np.geomspace(lo, hi, 241), values]))
+
+
+def _epistemic_family(sub: xr.Dataset, grid_ft: np.ndarray) -> xr.Dataset:
+    """One P(go | H) per epistemic draw (ECDF over its aleatory samples), median and band."""
+    n_draws = sub.sizes["epistemic"]
+    curves = np.full((n_draws, grid_ft.size), np.nan)
+    h50 = np.full(n_draws, np.nan)
+    for e in range(n_draws):
+        draw = sub.isel(epistemic=e)
+        status = np.asarray(draw["status"].values).astype(str)
+        height_ft = np.asarray(draw["critical_height"].values, dtype=float) / FT
+        ok = (status != "") & (status != "failed")
+        if not ok.any():
+            continue
+        h, st = height_ft[ok], status[ok]
+        # A drop from H goes when H >= H_c: censored "below" goes everywhere on the grid above
+        # its bound; censored "above" is a no-go up to its bound (beyond: not identified, NaN).
+        went = (h[None, :] <= grid_ft[:, None]) & (st[None, :] != "censored_above")
+        p = went.mean(axis=1)
+        top = h[st == "censored_above"].min() if (st == "censored_above").any() else math.inf
+        p[grid_ft > top] = np.nan
+        curves[e] = p
+        # H50 of the draw: the median critical height (NaN if censoring hides it).
+        order = np.sort(np.where(st == "censored_above", np.inf, h))
+        h50[e] = np.median(order) if np.isfinite(np.median(order)) else np.nan
+    low, high = EPISTEMIC_BAND
+    with np.errstate(all="ignore"):
+        median = np.nanmedian(curves, axis=0)
+        band = np.nanquantile(curves, [low, high], axis=0)
+    return xr.Dataset(
+        {
+            "p_go": (("epistemic", "height_ft"), curves,
+                     {"long_name": "P(go | H) of one epistemic draw", "units": "1"}),
+            "p_go_median": ("height_ft", median, {"units": "1"}),
+            "p_go_low": ("height_ft", band[0], {"units": "1",
+                                                "long_name": f"{low:.0%} across draws"}),
+            "p_go_high": ("height_ft", band[1], {"units": "1",
+                                                 "long_name": f"{high:.0%} across draws"}),
+            "h50": ("epistemic", h50, {"units": "ft",
+                                       "long_name": "median critical height of the draw"}),
+        },
+        coords={"height_ft": grid_ft, "epistemic": np.arange(n_draws)},
+    )
+
+
+def analyse_scene(ds: xr.Dataset, scene: str, *, experiment: str | None = None,
+                  confidence: float = 0.95, sobol: bool | None = None) -> SceneAnalysis:
+    """Go curve, log-normal fit, epistemic family, experiment and Sobol' indices of one scene.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        An ensemble (:func:`skidmc.analysis.open_ensemble`).
+    scene : str
+        A scene of `ds`.
+    experiment : str, optional
+        A key of :data:`skidmc.analysis.experiments.EXPERIMENTS` to compare with.
+    confidence : float
+        Coverage of every interval and band [1].
+    sobol : bool, optional
+        Compute Sobol' indices; default: when the design is ``saltelli``.
+
+    Returns
+    -------
+    SceneAnalysis
+    """
+    counts = scene_outcomes(ds, scene)
+    heights_ft = counts["heights_m"] / FT
+    censored = counts["censored"]
+    exp = experiments_module.get_experiment(experiment) if experiment else None
+    extra = [] if exp is None or exp.drops is None else exp.drops.heights
+    if exp is not None and math.isfinite(exp.h50):
+        extra = list(extra) + [exp.h50]
+    grid = _grid_ft(heights_ft, extra)
+    nested = "epistemic" in ds.dims
+    curve = go_curve(heights_ft, censored, confidence=confidence, grid=grid, units="ft")
+    curve.attrs["pooled"] = int(nested)
+    if nested:
+        curve.attrs["note"] = ("pooled over epistemic draws: mixes what is unknown (epistemic) "
+                               "with what varies from drop to drop (aleatory)")
+    n_exact = int((censored == "").sum())
+    fit = (fit_lognormal(heights_ft, censored, confidence=confidence) if n_exact >= 3
+           else None)
+    analysis = SceneAnalysis(scene=scene, counts=counts, curve=curve, fit=fit, experiment=exp)
+    if nested:
+        analysis.epistemic = _epistemic_family(_select(ds, scene), grid)
+    if exp is not None and exp.drops is not None and len(exp.drops):
+        drops = exp.drops
+        if drops.went.any() and not drops.went.all():
+            analysis.experimental_fit = fit_probit(drops.heights, drops.went,
+                                                   confidence=confidence)
+            analysis.updown = updown(drops.heights, drops.went)
+        if fit is not None:
+            analysis.scores = score_drops(fit.probability, drops.heights, drops.went)
+    design = ds.attrs.get("design_method", "")
+    if (sobol if sobol is not None else design == "saltelli") and design == "saltelli":
+        analysis.sobol = ensemble_sobol(ds, scene, confidence=confidence)
+    return analysis
+
+
+def _design_keys(ds: xr.Dataset) -> list[str]:
+    keys = ds.attrs.get("design_keys", [])
+    if isinstance(keys, str):  # netCDF stores a list of strings as its repr in some versions
+        keys = ast.literal_eval(keys)
+    return [str(k) for k in np.atleast_1d(keys)]
+
+
+def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
+                   resamples: int = 1000, seed: int = 0, policy: str = "cap+drop") -> xr.Dataset:
+    """Sobol' indices of ln H_c of one scene of a ``saltelli`` ensemble.
+
+    The design columns are the study's uncertain keys (uniform on [0, 1), mapped to each scene's
+    distributions: the indices are invariant under those monotone maps). A key that a scene does
+    not vary gets indices near 0.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        A complete ``saltelli`` ensemble.
+    scene : str
+    confidence, resamples, seed
+        Of the bootstrap intervals (:func:`~skidmc.analysis.sensitivity.sobol_indices`).
+    policy : str
+        Censored and failed samples (:func:`~skidmc.analysis.sensitivity.prepare_output`): by
+        default ln min(H, h_max) for censored samples and the whole linked block of a failed
+        sample dropped; the shares affected are in the result's attributes.
+
+    Returns
+    -------
+    xarray.Dataset
+        As :func:`~skidmc.analysis.sensitivity.sobol_indices`, with ``censored_share``,
+        ``failed_share`` and ``dropped_share`` attributes.
+    """
+    from skidmc.analysis.sensitivity import prepare_output, sobol_indices
+
+    if ds.attrs.get("design_method") != "saltelli":
+        raise ValueError(f"design_method = {ds.attrs.get('design_method')!r}: Sobol' indices "
+                         "need a 'saltelli' design")
+    sub = _select(ds, scene)
+    status = np.asarray(sub["status"].values).astype(str).reshape(-1)
+    if (status == "").any():
+        raise ValueError(f"scene {scene!r}: {(status == '').sum()} unfinished samples; Sobol' "
+                         "indices need the whole design (finish the run with --resume)")
+    keys = _design_keys(ds)
+    second = bool(ds.attrs.get("saltelli_second_order", 0))
+    problem = {"num_vars": len(keys), "names": keys, "bounds": [[0.0, 1.0]] * len(keys)}
+    prepared = prepare_output(sub["critical_height"].values.reshape(-1), status, policy=policy,
+                              h_max=float(ds.attrs["solver_h_max"]), problem=problem,
+                              second_order=second)
+    res = sobol_indices(problem, prepared.output, second_order=second, confidence=confidence,
+                        resamples=resamples, seed=seed)
+    res.attrs.update(output="ln critical_height [ln m]", policy=str(policy),
+                     censored_share=prepared.censored_share,
+                     failed_share=prepared.failed_share, dropped_share=prepared.dropped_share)
+    return res
+
+
+def analyse_ensemble(ds: xr.Dataset, *, experiments: Mapping[str, str] | None = None,
+                     confidence: float = 0.95) -> list[SceneAnalysis]:
+    """:func:`analyse_scene` for every scene of an ensemble.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+    experiments : mapping of str to str, optional
+        Scene name -> experiment name; default: the study's ``experiment`` keys (attribute
+        ``scene_experiments``), if any.
+    confidence : float
+
+    Returns
+    -------
+    list of SceneAnalysis
+    """
+    if experiments is None:
+        experiments = _study_experiments(ds)
+    return [analyse_scene(ds, s, experiment=experiments.get(s), confidence=confidence)
+            for s in _scene_names(ds)]
+
+
+def _study_experiments(ds: xr.Dataset) -> dict[str, str]:
+    text = ds.attrs.get("study_text", "")
+    if not text:
+        return {}
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+    doc = tomllib.loads(text)
+    return {sc["name"]: sc["experiment"] for sc in doc.get("scenes", [])
+            if "experiment" in sc and "name" in sc}
+
+
+# --- output ----------------------------------------------------------------------------------
+
+
+def _fmt(x: float, digits: int = 3) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return f"{x:.{digits}g}"
+
+
+def _triple(t) -> str:
+    est, low, high = t
+    return f"{_fmt(est)} [{_fmt(low)}, {_fmt(high)}]"
+
+
+def _summary_dict(a: SceneAnalysis) -> dict:
+    out = {"scene": a.scene, "counts": {k: v for k, v in a.counts.items()
+                                        if k not in ("heights_m", "censored")}}
+    if a.fit is not None:
+        out["lognormal"] = {
+            "units": "ft",
+            "h50": list(a.fit.intervals["h50"]), "h01": list(a.fit.intervals["h01"]),
+            "h10": list(a.fit.intervals["h10"]), "h90": list(a.fit.intervals["h90"]),
+            "sigma_ln": list(a.fit.intervals["sigma"]),
+            "ppcc": a.fit.ppcc, "p_value": a.fit.p_value, "verdict": a.fit.verdict,
+        }
+    if a.epistemic is not None:
+        h50 = a.epistemic["h50"].values
+        out["epistemic"] = {
+            "draws": int(h50.size),
+            "h50_ft_median": float(np.nanmedian(h50)),
+            "h50_ft_band": [float(np.nanquantile(h50, q)) for q in EPISTEMIC_BAND],
+        }
+    if a.experiment is not None:
+        exp = {"name": a.experiment.name, "description": a.experiment.description,
+               "report_h50_ft": a.experiment.h50, "qualifier": a.experiment.h50_qualifier,
+               "experimental_h50_ft": list(a.experimental_h50()),
+               "predicted_h50_ft": list(a.predicted_h50()), "source": a.experiment.source}
+        if a.experimental_fit is not None:
+            fit = a.experimental_fit
+            exp["probit"] = {"exists": bool(fit.exists), "reason": fit.reason,
+                             "h50_ft": fit.h50 if fit.exists else None,
+                             "sigma_ln": fit.sigma if fit.exists else None}
+        if a.updown is not None:
+            exp["updown"] = {"h50_ft": a.updown.h50, "sigma_log10": a.updown.sigma,
+                             "valid": bool(a.updown.valid), "reasons": list(a.updown.reasons)}
+        if a.scores is not None:
+            s = a.scores
+            exp["scores"] = {"n": s.n, "log_likelihood": s.log_likelihood,
+                             "log_score": s.log_score, "brier": s.brier,
+                             "brier_base_rate": s.brier_base_rate,
+                             "p_outcome": [float(p) for p in s.p_outcome]}
+        out["experiment"] = exp
+    if a.sobol is not None:
+        out["sobol"] = {
+            name: {k: float(a.sobol[k].sel(parameter=name))
+                   for k in ("S1", "S1_low", "S1_high", "ST", "ST_low", "ST_high")}
+            for name in map(str, a.sobol["parameter"].values)}
+        out["sobol_attrs"] = {k: (v if isinstance(v, (int, float, str)) else str(v))
+                              for k, v in a.sobol.attrs.items()}
+    return out
+
+
+def _json_safe(obj):
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        x = float(obj)
+        return None if math.isnan(x) else (str(x) if math.isinf(x) else x)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str:
+    lines = [f"# {ds.attrs.get('study_name', 'ensemble')}: go-probability report", "",
+             f"Generated by `skidmc report {source}` from `{source}` "
+             f"(design {ds.attrs.get('design_method')}, n = {ds.attrs.get('design_n')}, "
+             f"seed {ds.attrs.get('seed')}, solver rtol {ds.attrs.get('solver_rtol')}, tier "
+             f"{ds.attrs.get('solver_tier')}). Heights in ft (1 ft = 0.3048 m). Intervals: "
+             "95 % profile likelihood for fits; the go curves' bands are simultaneous (DKW).", ""]
+    if "epistemic" in ds.dims:
+        lines += ["The design nests aleatory (drop to drop) inside epistemic (fixed but unknown) "
+                  "inputs: the pooled fit below mixes both; the epistemic band is the spread of "
+                  "the per-draw curves.", ""]
+    lines += ["## Predicted critical heights (censored log-normal fit)", "",
+              "| scene | n | censored above/below | failed | H50 [ft] | sigma ln H | H01 | H10 | "
+              "H90 | log-normal? |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for a in analyses:
+        c = a.counts
+        if a.fit is None:
+            lines.append(f"| {a.scene} | {c['n']} | {c['n_above']}/{c['n_below']} | "
+                         f"{c['n_failed']} | - | - | - | - | - | too few exact heights |")
+            continue
+        iv = a.fit.intervals
+        lines.append(
+            f"| {a.scene} | {c['n']} | {c['n_above']}/{c['n_below']} | {c['n_failed']} | "
+            f"{_triple(iv['h50'])} | {_triple(iv['sigma'])} | {_triple(iv['h01'])} | "
+            f"{_triple(iv['h10'])} | {_triple(iv['h90'])} | {a.fit.verdict} "
+            f"(PPCC p = {_fmt(a.fit.p_value, 2)}) |")
+    nested = [a for a in analyses if a.epistemic is not None]
+    if nested:
+        lines += ["", "## Epistemic spread", "",
+                  "| scene | draws | median of per-draw H50 [ft] | 5-95 % of per-draw H50 [ft] |",
+                  "|---|---|---|---|"]
+        for a in nested:
+            h50 = a.epistemic["h50"].values
+            lo, hi = (np.nanquantile(h50, q) for q in EPISTEMIC_BAND)
+            lines.append(f"| {a.scene} | {h50.size} | {_fmt(np.nanmedian(h50))} | "
+                         f"{_fmt(lo)} - {_fmt(hi)} |")
+    with_exp = [a for a in analyses if a.experiment is not None]
+    if with_exp:
+        lines += ["", "## Against the experiments", "",
+                  "| scene | experiment | predicted H50 [ft] | experimental H50 [ft] | report | "
+                  "drops | log-likelihood | Brier | log score |", "|---|---|---|---|---|---|---|---|---|"]
+        for a in with_exp:
+            s = a.scores
+            exp = a.experiment
+            report = (f"> {_fmt(exp.h50)}" if exp.h50_qualifier == "lower_bound"
+                      else f"{'~' if exp.h50_qualifier == 'approximate' else ''}{_fmt(exp.h50)}")
+            lines.append(
+                f"| {a.scene} | {exp.name} | {_triple(a.predicted_h50())} | "
+                f"{_triple(a.experimental_h50())} | {report} | "
+                f"{0 if exp.drops is None else len(exp.drops)} | "
+                f"{_fmt(s.log_likelihood) if s else '-'} | {_fmt(s.brier) if s else '-'} | "
+                f"{_fmt(s.log_score) if s else '-'} |")
+        lines += ["", "Experimental intervals: probit maximum likelihood on ln H of the drops with "
+                  "a profile-likelihood interval; where the go and no-go heights do not overlap "
+                  "the maximum does not exist: the likelihood-ratio bounds are given around the "
+                  "report's value. Scores use the fitted log-normal P(go | H) of the ensemble."]
+        for a in with_exp:
+            if a.updown is not None:
+                lines.append(f"- {a.scene}: Dixon-Mood H50 {_fmt(a.updown.h50)} ft, "
+                             f"{'valid' if a.updown.valid else 'not valid: '}"
+                             f"{'; '.join(a.updown.reasons)}")
+            if a.experimental_fit is not None and not a.experimental_fit.exists:
+                lines.append(f"- {a.scene}: probit MLE does not exist: "
+                             f"{a.experimental_fit.reason}")
+    with_sobol = [a for a in analyses if a.sobol is not None]
+    if with_sobol:
+        lines += ["", "## Sobol' indices of ln H_c", ""]
+        for a in with_sobol:
+            res = a.sobol
+            order = np.argsort(-res["ST"].values)
+            lines += [f"### {a.scene}", "",
+                      f"N = {res.attrs.get('N')}, interval {res.attrs.get('interval')}, censored "
+                      f"share {_fmt(res.attrs.get('censored_share'), 2)}, dropped share "
+                      f"{_fmt(res.attrs.get('dropped_share'), 2)}", "",
+                      "| rank | input | S1 | ST |", "|---|---|---|---|"]
+            for rank, i in enumerate(order, 1):
+                r = res.isel(parameter=i)
+                flag = " (interval contains 0)" if bool(r["ST_contains_zero"]) else ""
+                lines.append(f"| {rank} | {str(r['parameter'].values)} | "
+                             f"{_triple((float(r.S1), float(r.S1_low), float(r.S1_high)))} | "
+                             f"{_triple((float(r.ST), float(r.ST_low), float(r.ST_high)))}"
+                             f"{flag} |")
+            lines.append("")
+    lines += ["", "Figures: `go_<scene>.png` (P(go | H) with its band, the log-normal fit and the "
+              "drops), `h50.png` (predicted against experimental 50 % heights), `qq.png` "
+              "(log-normal Q-Q)" + (", `sobol_<scene>.png`" if with_sobol else "") + ". Numbers: "
+              "`summary.json`; curves: `curves.h5`."]
+    return "\n".join(lines) + "\n"
+
+
+def _figures(out: Path, analyses: list[SceneAnalysis]) -> list[Path]:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as exc:  # pragma: no cover - matplotlib is in the figures extra
+        raise ImportError("skidmc report draws figures with matplotlib: "
+                          "pip install 'skidmc[figures]'") from exc
+    written = []
+    for a in analyses:
+        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        if a.epistemic is not None:
+            fam = a.epistemic
+            h = fam["height_ft"].values
+            for e in range(fam.sizes["epistemic"]):
+                ax.plot(h, fam["p_go"].isel(epistemic=e).values, color="0.7", lw=0.5,
+                        label="one epistemic draw" if e == 0 else None)
+            ax.fill_between(h, fam["p_go_low"].values, fam["p_go_high"].values, color="C1",
+                            alpha=0.25, label="5-95 % across epistemic draws")
+            ax.plot(h, fam["p_go_median"].values, color="C1", lw=2, label="median")
+        plot_go_curve(ax, a.curve, drops=a.experiment.drops if a.experiment else None,
+                      label="pooled" if a.epistemic is not None else "ensemble")
+        if a.fit is not None:
+            h = a.curve["height"].values
+            ax.plot(h, a.fit.probability(h), "--", color="C3", label="log-normal fit")
+        if a.experiment is not None and math.isfinite(a.experiment.h50):
+            ax.axvline(a.experiment.h50, color="k", ls=":", lw=1,
+                       label=f"report 50 % ({a.experiment.h50_qualifier or 'Table IX'})")
+        ax.set_xscale("log")
+        ax.set_xlabel("drop height H [ft]")
+        ax.set_ylabel("P(go | H)")
+        ax.set_ylim(-0.05, 1.05)
+        ax.set_title(f"{a.scene}: predicted probability of a reaction")
+        ax.legend(fontsize=7, loc="best")
+        fig.tight_layout()
+        path = out / f"go_{a.scene}.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        written.append(path)
+
+    comparable = [a for a in analyses if a.experiment is not None and a.fit is not None]
+    if comparable:
+        fig, ax = plt.subplots(figsize=(5.2, 5.0))
+        for i, a in enumerate(comparable):
+            p, e = a.predicted_h50(), a.experimental_h50()
+            x = e[0] if math.isfinite(e[0]) else e[1]
+            xerr = [[max(x - e[1], 0) if math.isfinite(e[1]) else 0],
+                    [max(e[2] - x, 0) if math.isfinite(e[2]) else 0]]
+            yerr = [[max(p[0] - p[1], 0)], [max(p[2] - p[0], 0)]]
+            marker = ">" if a.experiment.h50_qualifier == "lower_bound" else "o"
+            ax.errorbar([x], [p[0]], xerr=xerr, yerr=yerr, fmt=marker, color=f"C{i % 10}",
+                        capsize=3, label=a.scene)
+        lim = ax.get_xlim()[0], ax.get_xlim()[1]
+        lo = min(lim[0], ax.get_ylim()[0])
+        hi = max(lim[1], ax.get_ylim()[1])
+        ax.plot([lo, hi], [lo, hi], "k--", lw=0.8, label="equal")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("experimental H50 [ft] (> : lower bound)")
+        ax.set_ylabel("predicted H50 [ft]")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        path = out / "h50.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        written.append(path)
+
+    with_qq = [a for a in analyses if a.fit is not None and a.fit.qq is not None]
+    if with_qq:
+        cols = min(3, len(with_qq))
+        rows = math.ceil(len(with_qq) / cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(4.0 * cols, 3.6 * rows), squeeze=False)
+        for ax, a in zip(axes.flat, with_qq):
+            plot_qq(ax, a.fit)
+            ax.set_title(f"{a.scene}: {a.fit.verdict}", fontsize=8)
+        for ax in list(axes.flat)[len(with_qq):]:
+            ax.set_visible(False)
+        fig.tight_layout()
+        path = out / "qq.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        written.append(path)
+
+    for a in analyses:
+        if a.sobol is None:
+            continue
+        from skidmc.analysis.sensitivity import plot_indices
+
+        fig, ax = plt.subplots(figsize=(7.0, 3.8))
+        plot_indices(ax, a.sobol)
+        ax.set_title(f"{a.scene}: Sobol' indices of ln H_c")
+        fig.tight_layout()
+        path = out / f"sobol_{a.scene}.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def _curves_dataset(analyses: list[SceneAnalysis]) -> xr.Dataset:
+    parts = {}
+    for a in analyses:
+        c = a.curve.rename({"height": f"height_ft_{a.scene}"})
+        for name in ("p_go", "p_go_low", "p_go_high"):
+            parts[f"{name}_{a.scene}"] = c[name]
+        if a.epistemic is not None:
+            e = a.epistemic.rename({"height_ft": f"height_ft_{a.scene}",
+                                    "epistemic": "epistemic"})
+            for name in ("p_go", "p_go_median", "p_go_low", "p_go_high", "h50"):
+                parts[f"epistemic_{name}_{a.scene}"] = e[name]
+    ds = xr.Dataset(parts)
+    for a in analyses:
+        ds[f"height_ft_{a.scene}"].attrs.update(units="ft", long_name="drop height H")
+    ds.attrs["description"] = "P(go | H) per scene: empirical curve with a simultaneous band"
+    return ds
+
+
+def write_report(ds: xr.Dataset, out_dir: str | Path, *, source: str = "",
+                 experiments: Mapping[str, str] | None = None,
+                 confidence: float = 0.95) -> dict:
+    """Analyse an ensemble and write its report.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        An ensemble (:func:`skidmc.analysis.open_ensemble`).
+    out_dir : str or Path
+        Folder to write into (created).
+    source : str
+        How the ensemble was named on the command line (for the report's header).
+    experiments : mapping of str to str, optional
+        Scene -> experiment; default: the study's ``experiment`` keys.
+    confidence : float
+
+    Returns
+    -------
+    dict
+        ``analyses`` (list of :class:`SceneAnalysis`) and ``files`` (paths written).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    analyses = analyse_ensemble(ds, experiments=experiments, confidence=confidence)
+    files = _figures(out, analyses)
+    summary = {"study": ds.attrs.get("study_name", ""), "confidence": confidence,
+               "nested": "epistemic" in ds.dims,
+               "scenes": [_summary_dict(a) for a in analyses]}
+    (out / "summary.json").write_text(json.dumps(_json_safe(summary), indent=1) + "\n")
+    (out / "summary.md").write_text(_markdown(ds, analyses, source))
+    curves_path = out / "curves.h5"
+    _curves_dataset(analyses).to_netcdf(curves_path, engine="h5netcdf")
+    files += [out / "summary.json", out / "summary.md", curves_path]
+    return {"analyses": analyses, "files": files}

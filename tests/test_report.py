@@ -1,0 +1,142 @@
+"""The go-probability report on synthetic ensembles whose answers are known."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import xarray as xr
+from scipy import stats
+
+from skidmc.analysis.report import FT, analyse_scene, ensemble_sobol, scene_outcomes, write_report
+
+H50_FT, SIGMA = 2.0, 0.4
+
+
+def _ensemble(n=400, seed=1, h_max_ft=6.0, nested=None):
+    """An ensemble of log-normal critical heights (median 2 ft, sigma 0.4) in the layout of
+    skidmc.analysis.open_ensemble: one scene "quartz", statuses, one failed and one unfinished
+    sample, heights above h_max censored "above" at it."""
+    rng = np.random.default_rng(seed)
+    shape = (n,) if nested is None else (nested, n)
+    h_ft = H50_FT * np.exp(SIGMA * rng.standard_normal(shape))
+    status = np.where(h_ft > h_max_ft, "censored_above", "ok").astype(object)
+    h_ft = np.minimum(h_ft, h_max_ft)
+    flat_status = status.reshape(-1)
+    flat_h = h_ft.reshape(-1)
+    flat_status[0], flat_h[0] = "failed", np.nan
+    flat_status[1], flat_h[1] = "", np.nan  # unfinished (masked by open_ensemble)
+    dims = ("scene", "sample") if nested is None else ("scene", "epistemic", "sample")
+    return xr.Dataset(
+        {"critical_height": (dims, (h_ft * FT)[None]), "status": (dims, status[None])},
+        coords={"scene": ["quartz"]},
+        attrs={"study_name": "synthetic", "design_method": "mc", "design_n": n, "seed": seed,
+               "solver_rtol": 1e-2, "solver_tier": "full", "solver_h_max": h_max_ft * FT})
+
+
+def test_outcomes_count_every_status():
+    ds = _ensemble()
+    out = scene_outcomes(ds, "quartz")
+    n_above = int((ds.status.values == "censored_above").sum())
+    assert (out["n_failed"], out["n_unfinished"], out["n_above"]) == (1, 1, n_above)
+    assert out["n"] == 400 - 2 and out["heights_m"].size == out["n"]
+    assert n_above > 0  # the test exercises censoring
+
+
+def test_fit_recovers_the_lognormal():
+    a = analyse_scene(_ensemble(), "quartz")
+    n = a.counts["n"]
+    est, low, high = a.predicted_h50()
+    # Estimates within 3 standard errors of the truth (SE of ln H50 = sigma/sqrt(n), of sigma
+    # ~ sigma/sqrt(2n)); the intervals' coverage itself is measured in tests/test_gonogo.py.
+    assert abs(math.log(est / H50_FT)) < 3 * SIGMA / math.sqrt(n)
+    s_est, s_low, s_high = a.fit.intervals["sigma"]
+    assert abs(s_est - SIGMA) < 3 * SIGMA / math.sqrt(2 * n)
+    # The 95 % interval of ln H50 is about 2 x 1.96 standard errors wide.
+    width = math.log(high / low)
+    assert width == pytest.approx(2 * 1.96 * s_est / math.sqrt(n), rel=0.15)
+    assert "consistent" in a.fit.verdict
+
+
+def test_go_curve_follows_the_lognormal_cdf_and_stops_at_the_censoring_bound():
+    a = analyse_scene(_ensemble(n=2000), "quartz")
+    curve = a.curve
+    h = curve["height"].values
+    inside = curve["identified"].values.astype(bool)
+    truth = stats.norm.cdf(np.log(h / H50_FT) / SIGMA)
+    # The simultaneous band covers the true CDF (95 %: a fixed seed, not cherry-picked).
+    assert np.all(curve["p_go_low"].values[inside] <= truth[inside] + 1e-12)
+    assert np.all(truth[inside] <= curve["p_go_high"].values[inside] + 1e-12)
+    assert not inside[h > 6.0].any()  # above the censoring bound nothing is identified
+
+
+def test_nested_design_gives_one_curve_per_epistemic_draw():
+    ds = _ensemble(n=300, nested=8)
+    a = analyse_scene(ds, "quartz")
+    fam = a.epistemic
+    assert fam.sizes["epistemic"] == 8
+    # Each draw's H50 is the median of its own samples (exact heights here are all below 6 ft
+    # except the censored ones, which sort last).
+    h = ds.critical_height.values[0] / FT
+    st = ds.status.values[0].astype(str)
+    for e in (2, 5):
+        ok = (st[e] != "") & (st[e] != "failed")
+        expect = np.median(np.where(st[e][ok] == "censored_above", np.inf, h[e][ok]))
+        assert fam["h50"].values[e] == pytest.approx(expect)
+    assert np.all(fam["p_go_low"].values <= fam["p_go_high"].values + 1e-12)
+    assert a.curve.attrs["pooled"] == 1 and "mixes" in a.curve.attrs["note"]
+
+
+def test_experiment_is_scored_and_bracketed():
+    a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
+    # Table III: ten drops; the probit maximum does not exist (no overlap), so the experimental
+    # H50 is the report's 1.8 ft with likelihood-ratio bounds around it.
+    assert a.scores.n == 10
+    est, low, high = a.experimental_h50()
+    assert est == 1.8 and low < 1.8 < high
+    assert not a.experimental_fit.exists
+    assert a.updown.h50 == pytest.approx(math.sqrt(1.5 * 2.12), rel=1e-12)
+
+
+def test_sobol_on_a_saltelli_ensemble_ranks_the_inputs():
+    from SALib.sample import sobol as saltelli
+
+    keys = ["mu", "flow_stress", "angle"]
+    problem = {"num_vars": 3, "names": keys, "bounds": [[0.0, 1.0]] * 3}
+    x = saltelli.sample(problem, 256, calc_second_order=False, scramble=True, seed=3)
+    # ln H = 2 x0 + 0.5 x1 (angle does not matter): ST(mu) = 16/17, ST(flow) = 1/17, ST(angle) = 0.
+    height = np.exp(2.0 * x[:, 0] + 0.5 * x[:, 1])
+    status = np.full(height.shape, "ok", dtype=object)
+    ds = xr.Dataset({"critical_height": (("scene", "sample"), height[None]),
+                     "status": (("scene", "sample"), status[None])},
+                    coords={"scene": ["s"]},
+                    attrs={"design_method": "saltelli", "design_keys": keys,
+                           "saltelli_second_order": 0, "solver_h_max": 1e4})
+    res = ensemble_sobol(ds, "s", resamples=200)
+    st = dict(zip(keys, res["ST"].values))
+    assert st["mu"] > st["flow_stress"] > st["angle"]
+    assert res["ST_low"].sel(parameter="mu") < 16 / 17 < res["ST_high"].sel(parameter="mu")
+    assert bool(res["ST_contains_zero"].sel(parameter="angle"))
+    assert res.attrs["censored_share"] == 0.0
+
+
+def test_sobol_refuses_other_designs():
+    with pytest.raises(ValueError, match="design_method = 'mc'"):
+        ensemble_sobol(_ensemble(), "quartz")
+
+
+def test_write_report_writes_every_file(tmp_path):
+    out = write_report(_ensemble(), tmp_path, source="synthetic.h5",
+                       experiments={"quartz": "quartz"})
+    names = {p.name for p in out["files"]}
+    assert {"go_quartz.png", "h50.png", "qq.png", "summary.json", "summary.md",
+            "curves.h5"} <= names
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    scene = summary["scenes"][0]
+    assert scene["experiment"]["report_h50_ft"] == 1.8
+    assert scene["counts"]["n_failed"] == 1
+    assert "| quartz | quartz |" in (tmp_path / "summary.md").read_text()
+    curves = xr.open_dataset(tmp_path / "curves.h5", engine="h5netcdf")
+    assert "p_go_quartz" in curves and curves["height_ft_quartz"].attrs["units"] == "ft"
