@@ -483,7 +483,8 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str
     if with_exp:
         lines += ["", "## Against the experiments", "",
                   "| scene | experiment | predicted H50 [ft] | experimental H50 [ft] | report | "
-                  "drops | log-likelihood | Brier | log score |", "|---|---|---|---|---|---|---|---|---|"]
+                  "drops | log-likelihood | Brier | log score |",
+                  "|---|---|---|---|---|---|---|---|---|"]
         for a in with_exp:
             s = a.scores
             exp = a.experiment
