@@ -203,3 +203,33 @@ def test_transform_checks_the_column_count():
     study = _study()
     with pytest.raises(ValueError, match="columns"):
         transform(study, np.zeros((3, 2)))
+
+
+# --- nested (epistemic x aleatory) design ---------------------------------------------------------
+
+
+def test_nested_design_rows_are_outer_times_inner_and_chunk_independent():
+    from skidmc.ensemble.sampling import NestedDesign
+
+    design = NestedDesign("lhs", 5, 7, outer_columns=[1, 3], inner_columns=[0, 2], seed=11)
+    full = design.rows(0, design.n_rows)
+    assert full.shape == (35, 4)
+    # Row r = (e, a): the epistemic columns repeat within an outer draw, the aleatory columns
+    # repeat across outer draws (common random numbers).
+    grid = full.reshape(5, 7, 4)
+    assert np.array_equal(grid[:, :, [1, 3]], np.repeat(grid[:, :1, [1, 3]], 7, axis=1))
+    assert np.array_equal(grid[:, :, [0, 2]], np.repeat(grid[:1, :, [0, 2]], 5, axis=0))
+    # Each level is a Latin hypercube of its own size: one point per stratum in every column.
+    for level, n in ((grid[:, 0, [1, 3]], 5), (grid[0, :, [0, 2]].T, 7)):
+        for column in level.T:
+            assert sorted(np.floor(column * n).astype(int)) == list(range(n))
+    # Any chunking gives the same rows.
+    parts = [design.rows(a, min(a + 6, 35)) for a in range(0, 35, 6)]
+    assert np.array_equal(np.vstack(parts), full)
+
+
+def test_nested_design_refuses_saltelli():
+    from skidmc.ensemble.sampling import NestedDesign
+
+    with pytest.raises(ValueError, match="saltelli"):
+        NestedDesign("saltelli", 2, 2, [0], [1], seed=0)

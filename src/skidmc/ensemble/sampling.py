@@ -36,6 +36,7 @@ from skidmc.ensemble.study import RATE_AT_REFERENCE, U_TAIL, Study
 
 __all__ = [
     "MC_BLOCK",
+    "NestedDesign",
     "StudySampler",
     "UniformDesign",
     "salib_problem",
@@ -164,17 +165,72 @@ def salib_problem(study: Study) -> dict:
             "bounds": [[0.0, 1.0]] * len(study.keys)}
 
 
+class NestedDesign:
+    """A second-order design: outer epistemic draws x inner aleatory draws, by row index.
+
+    Row ``r`` is epistemic draw ``e = r // n_inner`` and aleatory draw ``a = r % n_inner``: its
+    epistemic columns are row ``e`` of the outer design, its aleatory columns row ``a`` of the
+    inner design. Every epistemic draw meets the same aleatory draws (common random numbers): the
+    curves of two epistemic draws then differ by what the epistemic inputs do, not by sampling
+    noise of the aleatory ones. Rows depend only on their index, so a sample is the same whatever
+    the chunking, worker count or interruption.
+
+    Parameters
+    ----------
+    method : str
+        Design of both levels (``mc``, ``lhs`` or ``sobol``).
+    n_outer, n_inner : int
+        Epistemic draws, aleatory draws per epistemic draw.
+    outer_columns, inner_columns : sequence of int
+        Columns (of the study's keys) of each level; together every column once.
+    seed : int
+        Study seed; the two levels use independent streams of it.
+    """
+
+    def __init__(self, method: str, n_outer: int, n_inner: int, outer_columns, inner_columns,
+                 seed: int) -> None:
+        if method == "saltelli":
+            raise ValueError("method = 'saltelli': a nested (epistemic x aleatory) design takes "
+                             "mc, lhs or sobol")
+        self.outer_columns = np.asarray(outer_columns, dtype=int)
+        self.inner_columns = np.asarray(inner_columns, dtype=int)
+        self.d = self.outer_columns.size + self.inner_columns.size
+        self.n_outer, self.n_inner = int(n_outer), int(n_inner)
+        # Independent streams: the outer design from seed's child 0, the inner from child 1.
+        child = np.random.SeedSequence(seed).spawn(2)
+        self.outer = UniformDesign(method, self.n_outer, self.outer_columns.size,
+                                   int(child[0].generate_state(1)[0]))
+        self.inner = UniformDesign(method, self.n_inner, self.inner_columns.size,
+                                   int(child[1].generate_state(1)[0]))
+        self.n_rows = self.n_outer * self.n_inner
+
+    def rows(self, start: int, stop: int) -> np.ndarray:
+        """Rows ``start:stop``, shape (stop - start, d), values in [0, 1)."""
+        if not 0 <= start <= stop <= self.n_rows:
+            raise IndexError(f"rows {start}:{stop} outside the design's 0:{self.n_rows}")
+        index = np.arange(start, stop)
+        outer_index, inner_index = np.divmod(index, self.n_inner)
+        out = np.empty((index.size, self.d))
+        if index.size:
+            e0, e1 = int(outer_index[0]), int(outer_index[-1]) + 1
+            a0, a1 = int(inner_index.min()), int(inner_index.max()) + 1
+            out[:, self.outer_columns] = self.outer.rows(e0, e1)[outer_index - e0]
+            out[:, self.inner_columns] = self.inner.rows(a0, a1)[inner_index - a0]
+        return out
+
+
 class StudySampler:
     """Draws a study's inputs slice by slice.
 
     Parameters
     ----------
     study : Study
-        A validated study; its design gives method, n and seed.
+        A validated study; its design gives method, n and seed. With both aleatory and
+        epistemic inputs and ``design.n_epistemic`` > 0 the design nests (:class:`NestedDesign`).
 
     Attributes
     ----------
-    design : UniformDesign
+    design : UniformDesign or NestedDesign
     n_rows : int
         Samples per scene.
     """
@@ -182,8 +238,15 @@ class StudySampler:
     def __init__(self, study: Study) -> None:
         self.study = study
         spec = study.design
-        self.design = UniformDesign(spec.method, spec.n, len(study.keys), spec.seed,
-                                    spec.second_order)
+        n_epistemic = getattr(spec, "n_epistemic", 0)
+        if n_epistemic:
+            epistemic = [i for i, k in enumerate(study.keys) if study.kind(k) == "epistemic"]
+            aleatory = [i for i, k in enumerate(study.keys) if study.kind(k) != "epistemic"]
+            self.design = NestedDesign(spec.method, n_epistemic, spec.n, epistemic, aleatory,
+                                       spec.seed)
+        else:
+            self.design = UniformDesign(spec.method, spec.n, len(study.keys), spec.seed,
+                                        spec.second_order)
         self.n_rows = self.design.n_rows
 
     def draw(self, start: int, stop: int) -> list[dict[str, np.ndarray]]:
