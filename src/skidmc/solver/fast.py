@@ -16,10 +16,26 @@ import operator
 import numpy as np
 
 from skidmc.errors import SceneError
-from skidmc.physics.fast import (_GL_W01, _GL_X01, _G, C_IGNITION, CENSOR_ABOVE, CENSOR_BELOW,
-                                 CENSOR_NONE, ERROR_ESTIMATE, EXIT_REBOUND, EXIT_STOPS_SLIDING,
-                                 MELT_FACTOR, MELT_TABLE, N_TIMES, duhamel_theta,
-                                 fast_height_kernel, fast_heights_kernel, impact_mechanics)
+from skidmc.physics.fast import (
+    _G,
+    _GL_W01,
+    _GL_X01,
+    C_IGNITION,
+    CENSOR_ABOVE,
+    CENSOR_BELOW,
+    CENSOR_NONE,
+    ERROR_ESTIMATE,
+    EXIT_REBOUND,
+    EXIT_STOPS_SLIDING,
+    MELT_FACTOR,
+    MELT_TABLE,
+    N_TIMES,
+    duhamel_theta,
+    fast_height_kernel,
+    fast_heights_kernel,
+    impact_mechanics,
+)
+from skidmc.scene.keys import FIELDS, NUMERIC_KEYS
 from skidmc.solver.results import HeightResult
 
 __all__ = [
@@ -30,14 +46,9 @@ __all__ = [
     "theta_history",
 ]
 
-#: Scene attributes in the kernels' argument order.
-SCENE_FIELDS = (
-    "mu", "flow_stress", "billet_mass", "billet_diameter", "angle", "tilt",
-    "initial_temperature", "he_density", "he_heat_capacity", "he_conductivity",
-    "he_heat_of_fusion", "he_melting_point", "kinetics_prefactor",
-    "kinetics_activation_temperature", "kinetics_heat_of_reaction", "target_density",
-    "target_heat_capacity", "target_conductivity",
-)
+#: Scene attributes in the kernels' argument order: the numeric keys in the order of
+#: :data:`skidmc.scene.keys.INPUT_KEYS` (a test checks it against the kernels' signatures).
+SCENE_FIELDS: tuple[str, ...] = tuple(FIELDS[key] for key in NUMERIC_KEYS)
 
 #: The scene's values in the kernels' argument order (a Scene stores validated floats).
 _scene_values = operator.attrgetter(*SCENE_FIELDS)
