@@ -1,7 +1,7 @@
 """The "peer": the skid-test model written the way a capable engineer would *without* skidmc.
 
 This module is the baseline of the speed benchmark (issue 3). It solves the same model as
-skidmc (report sections II.B-II.E, physics notes secs. 1-2), but the standard way: a
+skidmc (report sections II.B-II.E), but the standard way: a
 method-of-lines discretisation handed to ``scipy.integrate.solve_ivp(method="BDF")`` with a
 sparse Jacobian (by default the exact one, assembled into a fixed CSC pattern; or, with
 ``jacobian="sparsity"``, only its pattern via ``jac_sparsity`` so that scipy builds it by grouped

@@ -1,4 +1,5 @@
-"""Command-line front end: ``skidmc presets``, ``skidmc height``, ``skidmc run``.
+"""Command-line front end: ``skidmc presets``, ``skidmc materials``, ``skidmc height``,
+``skidmc run``.
 
 Every input error (:class:`skidmc.errors.SkidmcError`) ends the program with one line on stderr
 and exit status 2; anything else is a bug and keeps its traceback.
@@ -8,7 +9,9 @@ Examples
 ::
 
     skidmc presets
+    skidmc materials
     skidmc height --preset paper-quartz
+    skidmc height --preset paper-quartz --set target=steel
     skidmc height --preset paper2-quartz --set mu=0.056 --set flow_stress="34400 psi" --json
 """
 
@@ -83,7 +86,7 @@ def _scene_inputs(scene) -> dict[str, dict]:
 
 
 def _cmd_presets(args: argparse.Namespace) -> int:
-    from skidmc.scene import PRESETS, SI_UNITS, get_preset
+    from skidmc.scene import INPUT_KEYS, PRESETS, get_preset
 
     names = [args.name] if args.name else list(PRESETS)
     scenes = {name: get_preset(name) for name in names}  # raises SceneError on an unknown name
@@ -102,15 +105,48 @@ def _cmd_presets(args: argparse.Namespace) -> int:
     blocks = []
     for name, scene in scenes.items():
         written = PRESETS[name]["values"]
-        rows = [("key", "as given", "SI value", "unit")]
-        for key, value in scene.as_dict().items():
+        values = scene.as_dict()
+        rows = [("key", "as given", "SI value", "unit", "symbol")]
+        for ik in INPUT_KEYS:
+            value = values[ik.key]
             shown = value if isinstance(value, str) else f"{value:.6g}"
-            rows.append((key, written[key], shown, _unit_label(SI_UNITS[key])))
+            rows.append((ik.key, written[ik.key], shown, _unit_label(ik.si_unit), ik.symbol))
         blocks.append(
             f"{name}\n  source: {PRESETS[name]['source']}\n  notes:  {PRESETS[name]['notes']}\n"
             + _table(rows, indent="  ")
         )
     print("\n\n".join(blocks))
+    return 0
+
+
+# --- skidmc materials ----------------------------------------------------------------------------
+
+
+def _cmd_materials(args: argparse.Namespace) -> int:
+    from skidmc.scene import MATERIALS, SI_UNITS, get_material
+    from skidmc.scene.materials import TARGET_KEYS
+    from skidmc.scene.units import to_si
+
+    names = [args.name] if args.name else list(MATERIALS)
+    materials = [get_material(name) for name in names]  # SceneError on an unknown name
+    si = {m.name: {key: to_si(key, text, SI_UNITS[key]) for key, text in m.values.items()}
+          for m in materials}
+    if args.json:
+        print(json.dumps({m.name: {"description": m.description, "values": m.values,
+                                   "si": si[m.name], "source": m.source, "spread": m.spread}
+                          for m in materials}, indent=2))
+        return 0
+    rows = [("name", *(f"{key.split('.')[1]} [{SI_UNITS[key]}]" for key in TARGET_KEYS),
+             "description")]
+    rows += [(m.name, *(f"{v:.4g}" for v in si[m.name].values()), m.description)
+             for m in materials]
+    out = _table(rows)
+    if args.name:
+        m = materials[0]
+        out += (f"\n\nas given: {', '.join(m.values.values())}\nsource:   {m.source}\n"
+                f"spread:   {m.spread}")
+    print(out + "\n\nuse as: skidmc height --preset NAME --set target=MATERIAL "
+          "(a target.* key set too wins)")
     return 0
 
 
@@ -242,7 +278,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The ``skidmc`` argument parser (subcommands ``presets``, ``height``, ``run``)."""
+    """The ``skidmc`` argument parser (subcommands ``presets``, ``materials``, ``height``,
+    ``run``)."""
     parser = argparse.ArgumentParser(
         prog="skidmc", description="Oblique-impact (skid test) initiation model of HE billets."
     )
@@ -256,6 +293,15 @@ def build_parser() -> argparse.ArgumentParser:
     presets.add_argument("--json", action="store_true", help="print JSON")
     presets.set_defaults(func=_cmd_presets)
 
+    materials = subparsers.add_parser(
+        "materials", help="list the target materials (for --set target=NAME) with sources",
+        description="Named target materials: density, heat capacity and conductivity near room "
+        "temperature, with their sources and spread.",
+    )
+    materials.add_argument("name", nargs="?", help="show only this material, with its source")
+    materials.add_argument("--json", action="store_true", help="print JSON")
+    materials.set_defaults(func=_cmd_materials)
+
     height = subparsers.add_parser(
         "height", help="critical drop height of one scene",
         description="Critical drop height of a scene: a preset with optional overrides.",
@@ -264,7 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
     height.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE",
         help="override a scene input; VALUE is SI or has units, e.g. flow_stress='34400 psi' "
-        "(repeatable)",
+        "(repeatable); target=MATERIAL sets the target's properties (skidmc materials)",
     )
     height.add_argument(
         "--rtol", type=_positive_float, default=1e-3,

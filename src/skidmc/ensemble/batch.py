@@ -38,7 +38,9 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
     scenes : sequence of Scene or mapping, or mapping of columns
         The batch: :class:`~skidmc.scene.Scene` objects; or mappings of scene keys to values
         (SI floats or unit strings), applied as overrides to `base`
-        (``make_scene(row, preset=base)``); or one mapping ``{key: 1-D array}`` of columns.
+        (``make_scene(row, preset=base, check_plausible=False)``: rows are programmatic, so
+        bare numbers are SI and not checked for plausibility); or one mapping
+        ``{key: 1-D array}`` of columns.
     solver_options : SolverOptions or mapping, optional
         Keyword arguments of :func:`skidmc.solver.critical_height` (default: its defaults).
     base : Scene or str, optional

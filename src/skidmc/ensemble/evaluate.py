@@ -147,7 +147,9 @@ def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None) -> BatchResult:
     base_values = base.as_dict() if base is not None else {}
     for i, row in enumerate(rows):
         try:
-            scene = row if isinstance(row, Scene) else make_scene(row, preset=base)
+            # rows are programmatic SI floats (samples): no plausibility check on bare numbers
+            scene = row if isinstance(row, Scene) else make_scene(row, preset=base,
+                                                                  check_plausible=False)
         except Exception as exc:  # noqa: BLE001 - an invalid sample fails alone, not the run
             record_given(out, i, row, base_values)
             out.failure_reason[i] = f"invalid inputs: {type(exc).__name__}: {exc}"

@@ -57,6 +57,14 @@ Physical bounds are checked at load: every distribution's 1e-9 and 1 - 1e-9 quan
 scene it applies to, must be valid scene values (the scene layer's ranges, and a friction
 coefficient in (0, 1)); the sampling then never leaves those quantiles
 (:data:`U_TAIL`), so no sample can fall outside the range that was checked.
+
+A bare number (no units) for a dimensional key is read in the key's SI unit, and refused where
+that reading is implausible (:attr:`skidmc.scene.keys.InputKey.plausible`): a scene value or a
+distribution's level parameter (``loc``; ``loguniform``'s ``a``, ``b``; ``lognorm``'s median
+``scale``) outside the key's plausible range, a spread (``scale``) wider than that range. The
+error names the TOML key and the number as written (``uncertain.flow_stress.loc = 28000: is
+read as 28000 Pa (SI), ...``); write units to use such a value. A scene table may name its
+target material, ``target = "steel"`` (:mod:`skidmc.scene.materials`).
 """
 
 from __future__ import annotations
@@ -76,7 +84,8 @@ import scipy.stats
 
 from skidmc.errors import SceneError, SkidmcError
 from skidmc.scene import SCENE_KEYS, SI_UNITS, Scene, make_scene
-from skidmc.scene.units import to_si
+from skidmc.scene.keys import implausible_reason
+from skidmc.scene.units import read_si, to_si
 
 try:
     import tomllib
@@ -102,7 +111,10 @@ __all__ = [
 DESIGN_METHODS: tuple[str, ...] = ("mc", "lhs", "sobol", "saltelli")
 
 #: Pseudo-key sampled instead of ``kinetics.prefactor``: the Arrhenius rate at a reference
-#: temperature, k_ref = Z exp(-E/R / T_ref) [1/s] (physics notes sec. 5, compensation effect).
+#: temperature, k_ref = Z exp(-E/R / T_ref) [1/s]. Fitted (E, Z) pairs of one material fall
+#: along ln Z ~ E / (R T_iso) (the kinetic compensation effect; for HMX: Brill, Gongwer &
+#: Williams, J. Phys. Chem. 98 (1994) 12242), so the rate near the measured temperatures is
+#: far better known than Z; docs/inputs.md, "Kinetics".
 RATE_AT_REFERENCE = "kinetics.rate_at_reference"
 
 #: Sampled keys that are not scene keys: key -> (SI unit, long name).
@@ -615,7 +627,7 @@ class _Parser:
         source = spec.get("source")
         if not isinstance(source, str) or not source.strip():
             raise self.error(where + ".source", source, "every distribution needs a `source`: "
-                             "where its width comes from (report, physics notes, handbook)")
+                             "where its width comes from (report, handbook, literature)")
         relative = spec.get("relative", False)
         if not isinstance(relative, bool):
             raise self.error(where + ".relative", relative, "expected true or false")
@@ -664,6 +676,9 @@ class _Parser:
                 params[pname] = self.quantity(key, raw, unit, at_param)
             if not math.isfinite(params[pname]):
                 raise self.error(at_param, raw, "must be finite")
+            if not relative and role != "number" and key in SI_UNITS:
+                self.check_plausible(key, raw, params[pname], at_param,
+                                     difference=role == "difference")
         params = {p: params[p] for p in allowed if p in params}  # scipy's order
         d = Distribution(key=key, name=name, params=tuple(params.items()), source=source,
                          relative=relative, reference_temperature=t_ref)
@@ -679,6 +694,19 @@ class _Parser:
             return to_si(key, raw, unit)
         except SceneError as exc:
             raise self.error(at, raw, exc.reason) from None
+
+    def check_plausible(self, key: str, raw: object, value: float, at: str,
+                        difference: bool = False) -> None:
+        """Refuse a bare number (no units: read as SI) that is implausible for `key`: a level
+        outside the key's plausible range, a difference wider than that range
+        (:func:`skidmc.scene.keys.implausible_reason`)."""
+        if isinstance(raw, bool) or not isinstance(raw, (numbers.Real, str)):
+            return
+        if not read_si(key, raw, SI_UNITS[key])[1]:
+            return  # written with units: only the bounds apply
+        reason = implausible_reason(key, value, raw, difference=difference)
+        if reason is not None:
+            raise self.error(at, raw, reason)
 
     def difference(self, key: str, raw: object, unit: str, at: str) -> float:
         """A spread: converted as a difference (5 degC of spread is 5 K, not 278.15 K)."""
@@ -706,7 +734,7 @@ class _Parser:
                     reason = f"a sampled {d.key} must lie in ({lo:g}, {hi:g})"
             if reason is None and d.key in SI_UNITS:
                 try:
-                    sc.scene.replace({d.key: x})
+                    sc.scene.replace({d.key: x}, check_plausible=False)  # SI, not written
                 except SceneError as exc:
                     reason = exc.reason
             elif reason is None and x <= 0.0:

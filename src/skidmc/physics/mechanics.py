@@ -172,8 +172,8 @@ def sliding_deceleration_coefficient(mu, tilt):
 
     C = mu + (a' mu + b') D W X''' / (2 I_cg), where X''' = sqrt(X'^2 + X''^2)
     = (D/2) sqrt(a'^2 + b'^2) is the distance from the centre of gravity to the
-    contact centre (the report's "X''' = [(X'')^2 + (X''')^2]^(1/2)" is a typo, see
-    physics notes sec. 1). With I_cg = 0.0648 D^2 W the diameter and mass cancel.
+    contact centre (the report's "X''' = [(X'')^2 + (X''')^2]^(1/2)" is a typo for the length
+    of the lever arm (X', X'')). With I_cg = 0.0648 D^2 W the diameter and mass cancel.
     The first term is the translational deceleration by friction, the second the
     contact point's velocity due to the spin friction (and, for psi > 0, the normal
     force) imparts.

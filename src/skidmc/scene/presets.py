@@ -1,9 +1,10 @@
 """Presets: the report's scenes, written in the report's units, and its published results.
 
 Source: "Effect of Target Thermal Conductivity and Roughness on the Initiation of PBX 9404 by
-Oblique Impact" (Los Alamos report, text in ``shared/paper/``; the model also appears as
-Randolph, Hatler & Popolato, Ind. Eng. Chem. Fundam. 15 (1976) 1). Table and section numbers
-below are the report's.
+Oblique Impact" (Los Alamos Scientific Laboratory report; the model also appears as Randolph,
+Hatler & Popolato, Ind. Eng. Chem. Fundam. 15 (1976) 1). Table and section numbers below are the
+report's. The targets' Table VI values are entries of :mod:`skidmc.scene.materials`
+(``quartz-report``, ``alumina-85-report``, ``gold-report``), written once there.
 
 Each entry of :data:`PRESETS` is ``{"source": str, "notes": str, "values": {key: str}}`` with
 the values as unit strings (``"28000 psi"``), so that ``skidmc presets`` shows what the report
@@ -18,6 +19,8 @@ diffusivity column alpha = k / (rho c) for all four materials; we read k per °C
 from __future__ import annotations
 
 from typing import NamedTuple
+
+from skidmc.scene.materials import MATERIALS
 
 __all__ = [
     "PAPER_TABLE_III",
@@ -61,22 +64,10 @@ _PBX9404 = {
     "kinetics.heat_of_reaction": "6.66e5 cal/mol / (296.16 g/mol)",
 }
 
-# Targets: Table VI.
-_QUARTZ = {
-    "target.density": "2.67 g/cm^3",
-    "target.heat_capacity": "0.188 cal/g/K",
-    "target.conductivity": "4.05e-3 cal/s/cm/K",
-}
-_ALUMINA = {
-    "target.density": "3.40 g/cm^3",
-    "target.heat_capacity": "0.18 cal/g/K",
-    "target.conductivity": "2.1e-2 cal/s/cm/K",
-}
-_GOLD = {
-    "target.density": "19.3 g/cm^3",
-    "target.heat_capacity": "0.0316 cal/g/K",
-    "target.conductivity": "7.03e-1 cal/s/cm/K",
-}
+# Targets: Table VI, as the materials registry holds it.
+_QUARTZ = MATERIALS["quartz-report"].values
+_ALUMINA = MATERIALS["alumina-85-report"].values
+_GOLD = MATERIALS["gold-report"].values
 
 _FIRST_SERIES_SOURCE = (
     "LA report, first series: Sec. III (billet, configuration), Sec. IV (sigma, T0), "

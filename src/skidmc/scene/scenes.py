@@ -6,9 +6,14 @@ which starts from a preset or from nothing, applies overrides given as SI floats
 (``"28000 psi"``), converts them (:func:`skidmc.scene.units.to_si`) and validates them. Every rejected
 input raises :class:`skidmc.errors.SceneError` naming the key and the value as given.
 
-The billet tilt psi follows the configuration unless it is given explicitly (report Sec. II.C and
-physics notes sec. 1): for a vertical drop onto an inclined target psi = phi, the target angle;
-for the pendulum drop psi = 0, the harness keeps the flat face horizontal.
+The billet tilt psi follows the configuration unless it is given explicitly (report Sec. II.C,
+"psi = phi for vertical drops when the flat surface of the hemisphere is horizontal at impact"):
+for a vertical drop onto an inclined target psi = phi, the target angle; for the pendulum drop
+psi = 0, the harness keeps the flat face horizontal.
+
+A named target material (``target="steel"``, :mod:`skidmc.scene.materials`) sets the three
+``target.*`` keys; a bare number for a dimensional key is read as SI and refused by
+:func:`make_scene` when that reading is implausible (:attr:`skidmc.scene.keys.InputKey.plausible`).
 """
 
 from __future__ import annotations
@@ -22,18 +27,24 @@ import numpy as np
 
 from skidmc.errors import MissingKeyError, SceneError, UnknownKeyError
 from skidmc.scene.keys import (
-    _BOUNDS,
-    _PARTNER,
+    BETWEEN_KEYS,
     CONFIGURATIONS,
     DESCRIPTIONS,
+    FIELDS,
+    INPUT_KEYS,
     NUMERIC_KEYS,
+    PARTNERS,
     SCENE_KEYS,
     SI_UNITS,
+    between_keys_ok,
     bound_reason,
+    first_broken_between,
+    implausible_reason,
     in_bounds,
 )
+from skidmc.scene.materials import MATERIAL_KEY, get_material
 from skidmc.scene.presets import PRESETS
-from skidmc.scene.units import to_si
+from skidmc.scene.units import read_si
 
 __all__ = [
     "CONFIGURATIONS",
@@ -50,77 +61,52 @@ __all__ = [
 
 # Attribute name of each key (dots -> underscores) and back; attribute names are also accepted as
 # keys in overrides, so that ``scene.replace(he_density=1900.0)`` works.
-_FIELD_OF_KEY: dict[str, str] = {k: k.replace(".", "_") for k in SCENE_KEYS}
+_FIELD_OF_KEY: dict[str, str] = FIELDS
 _KEY_OF_NAME: dict[str, str] = {
     **{field: key for key, field in _FIELD_OF_KEY.items()},
     **{key: key for key in SCENE_KEYS},
 }
+_NUMERIC = frozenset(NUMERIC_KEYS)
+_ATTRIBUTES_MARK = "<attributes from skidmc.scene.keys.INPUT_KEYS>"
+
+
+def _fields_from_input_keys(cls: type) -> type:
+    """Give `cls` one field per :data:`~skidmc.scene.keys.INPUT_KEYS` entry (in its order, typed
+    float or str) and the docstring's Attributes section, before :func:`dataclasses.dataclass`
+    makes it a dataclass: the table is the one definition of the fields."""
+    cls.__annotations__ = {k.field: k.type_name for k in INPUT_KEYS}
+    lines = []
+    for k in INPUT_KEYS:
+        unit = f" [{k.si_unit}]" if k.numeric else ""
+        text = k.description[0].upper() + k.description[1:]
+        if not k.numeric:
+            text += ": " + " or ".join(f"``{c!r}``" for c in CONFIGURATIONS)
+        lines += [f"    {k.field} : {k.type_name}", f"        {text}{unit}."]
+    if cls.__doc__:  # None under python -OO
+        cls.__doc__ = cls.__doc__.replace("    " + _ATTRIBUTES_MARK, "\n".join(lines))
+    return cls
+
 
 @dataclasses.dataclass(frozen=True)
+@_fields_from_input_keys
 class Scene:
     """The validated inputs of one skid-test simulation, in SI units (angles in degrees).
 
-    Construct with :func:`make_scene` (unit strings, presets, defaults for ``tilt``); direct
-    construction takes SI floats and validates them the same way.
+    Construct with :func:`make_scene` (unit strings, presets, materials, defaults for
+    ``tilt``); direct construction takes SI floats and validates them the same way (bounds and
+    the checks between keys; bare numbers are not checked for plausibility here). The fields,
+    one per key of :data:`skidmc.scene.keys.INPUT_KEYS` in its order, are generated from that
+    table, as is this list.
 
     Attributes
     ----------
-    mu : float
-        Apparent coefficient of sliding friction, Eq. (1) [1].
-    flow_stress : float
-        Plastic flow stress of the billet sigma [Pa].
-    billet_mass : float
-        Billet mass W [kg].
-    billet_diameter : float
-        Hemisphere diameter D [m].
-    configuration : str
-        ``"pendulum"`` or ``"vertical"``.
-    angle : float
-        phi: complement of the approach angle (pendulum) or target angle (vertical) [deg].
-    tilt : float
-        psi: billet tilt; 0 for the pendulum, equal to `angle` for the vertical drop [deg].
-    initial_temperature : float
-        T0 [K].
-    he_density, he_heat_capacity, he_conductivity : float
-        HE density [kg/m^3], specific heat [J/(kg K)], thermal conductivity [W/(m K)].
-    he_heat_of_fusion : float
-        HE latent heat of melting, 0 disables melting [J/kg].
-    he_melting_point : float
-        HE melting temperature [K].
-    kinetics_prefactor : float
-        Arrhenius frequency factor Z [1/s].
-    kinetics_activation_temperature : float
-        Activation temperature E/R [K].
-    kinetics_heat_of_reaction : float
-        Heat of reaction per unit mass Q [J/kg].
-    target_density, target_heat_capacity, target_conductivity : float
-        Target density [kg/m^3], specific heat [J/(kg K)], thermal conductivity [W/(m K)].
+    <attributes from skidmc.scene.keys.INPUT_KEYS>
 
     Raises
     ------
     SceneError
         On any invalid value (see :func:`make_scene`).
     """
-
-    mu: float
-    flow_stress: float
-    billet_mass: float
-    billet_diameter: float
-    configuration: str
-    angle: float
-    tilt: float
-    initial_temperature: float
-    he_density: float
-    he_heat_capacity: float
-    he_conductivity: float
-    he_heat_of_fusion: float
-    he_melting_point: float
-    kinetics_prefactor: float
-    kinetics_activation_temperature: float
-    kinetics_heat_of_reaction: float
-    target_density: float
-    target_heat_capacity: float
-    target_conductivity: float
 
     def __post_init__(self) -> None:
         for key in NUMERIC_KEYS:
@@ -143,36 +129,28 @@ class Scene:
                 "configuration", self.configuration,
                 "must be one of " + ", ".join(repr(c) for c in CONFIGURATIONS),
             )
-        if self.configuration == "vertical" and not math.isclose(
-            self.tilt, self.angle, rel_tol=1e-9, abs_tol=1e-9
-        ):
-            raise SceneError(
-                "tilt", self.tilt,
-                f"must equal angle ({self.angle:g} deg) for a vertical drop, where the billet's "
-                "flat face is horizontal and psi = phi (report Sec. II.C); leave tilt out to have "
-                "it follow angle",
-            )
-        if self.initial_temperature >= self.he_melting_point:
-            raise SceneError(
-                "initial_temperature", self.initial_temperature,
-                f"initial_temperature ({self.initial_temperature:g} K) must be below "
-                f"he.melting_point ({self.he_melting_point:g} K)",
-            )
+        broken = first_broken_between({k: getattr(self, _FIELD_OF_KEY[k]) for k in BETWEEN_KEYS})
+        if broken is not None:
+            key, reason = broken
+            raise SceneError(key, getattr(self, _FIELD_OF_KEY[key]), reason)
 
     def as_dict(self) -> dict[str, float | str]:
         """Flat dotted keys -> SI values, in the order of :data:`SCENE_KEYS`."""
         return {key: getattr(self, _FIELD_OF_KEY[key]) for key in SCENE_KEYS}
 
-    def replace(self, mapping: Mapping | None = None, /, **overrides) -> Scene:
+    def replace(self, mapping: Mapping | None = None, /, *, check_plausible: bool = True,
+                **overrides) -> Scene:
         """A new scene with some values changed, re-validated.
 
         Parameters
         ----------
         mapping : mapping, optional
             Overrides with dotted keys (or nested dicts), values as in :func:`make_scene`.
+        check_plausible : bool
+            As in :func:`make_scene`.
         **overrides
             More overrides; dotted keys via ``**{"he.density": 1900.0}`` or attribute names
-            (``he_density=1900.0``).
+            (``he_density=1900.0``); ``target="steel"`` for a material.
 
         Returns
         -------
@@ -180,7 +158,7 @@ class Scene:
             ``make_scene(mapping, preset=self, **overrides)``: an unchanged default ``tilt`` keeps
             following the configuration (it tracks a new ``angle`` in a vertical drop).
         """
-        return make_scene(mapping, preset=self, **overrides)
+        return make_scene(mapping, preset=self, check_plausible=check_plausible, **overrides)
 
     def describe(self) -> str:
         """An aligned plain-text table: key, value, unit, description."""
@@ -222,16 +200,18 @@ def _base_values(preset: str | Scene | None) -> dict:
     raise SceneError("preset", preset, "expected a preset name or a Scene")
 
 
-def _convert(key: str, value: object) -> float | str:
+def _convert(key: str, value: object) -> tuple[float | str, bool]:
+    """A user value in SI, and whether it was a bare number (see :func:`read_si`)."""
     if key == "configuration":
         if not isinstance(value, str):
             raise SceneError(key, value, "must be one of " + ", ".join(map(repr, CONFIGURATIONS)))
-        return value.strip().lower()
-    return to_si(key, value, SI_UNITS[key])
+        return value.strip().lower(), False
+    return read_si(key, value, SI_UNITS[key])
 
 
 def make_scene(
-    mapping: Mapping | None = None, *, preset: str | Scene | None = None, **overrides
+    mapping: Mapping | None = None, *, preset: str | Scene | None = None,
+    check_plausible: bool = True, **overrides
 ) -> Scene:
     """Build a validated :class:`Scene` from a preset and overrides with units.
 
@@ -240,10 +220,18 @@ def make_scene(
     mapping : mapping, optional
         Overrides with dotted keys (``{"he.density": "1.91 g/cm^3"}``) or nested dicts as read
         from TOML (``{"he": {"density": ...}}``). Attribute names (``he_density``) are accepted too.
-        Values are SI floats or strings with units (:func:`skidmc.scene.units.to_si`).
+        Values are SI floats or strings with units (:func:`skidmc.scene.units.to_si`). The key
+        ``target`` names a material (:mod:`skidmc.scene.materials`): ``{"target": "steel"}``
+        sets ``target.density``, ``target.heat_capacity`` and ``target.conductivity``; a
+        ``target.*`` key given as well wins over the material's value.
     preset : str or Scene, optional
-        Name of a preset (:mod:`skidmc.scene.presets`) or a scene to start from. Without one, every key
-        of :data:`SCENE_KEYS` must be given (``tilt`` may be left to its default).
+        Name of a preset (:mod:`skidmc.scene.presets`) or a scene to start from. Without one,
+        every key of :data:`SCENE_KEYS` must be given (``tilt`` may be left to its default).
+    check_plausible : bool
+        Refuse a bare number (no units, read as SI) whose SI reading lies outside its key's
+        plausible range (:attr:`skidmc.scene.keys.InputKey.plausible`): ``flow_stress=28000``
+        is 28 kPa, surely meant in psi. Unit strings are never refused for plausibility, only
+        for bounds. ``False`` for programmatic SI floats (samplers, searches).
     **overrides
         More overrides, applied after `mapping` (a key in both takes this value).
 
@@ -268,7 +256,9 @@ def make_scene(
         ``kinetics.heat_of_reaction`` >= 0; 0 <= ``mu`` < 5; 0 < ``angle`` < 90 deg;
         0 <= ``tilt`` < 90 deg); ``configuration`` not ``"pendulum"``/``"vertical"``; a vertical
         drop whose ``tilt`` differs from ``angle``; ``initial_temperature`` not below
-        ``he.melting_point``.
+        ``he.melting_point``; an unknown material (key ``target``, close names suggested); with
+        `check_plausible`, a bare number read as an implausible SI value (checked after the
+        bounds, so an invalid number gets the bounds' message).
 
     Notes
     -----
@@ -282,10 +272,16 @@ def make_scene(
     given = _flatten(mapping or {})
     given.update(_flatten(overrides))  # keyword overrides win over the mapping
     values = dict(base)
+    if MATERIAL_KEY in given:  # before the keys given: an explicit target.* key wins
+        for key, text in get_material(given.pop(MATERIAL_KEY)).values.items():
+            values[key] = _convert(key, text)[0]
+    bare = []
     for key, raw in given.items():
         if key not in SI_UNITS:
-            raise UnknownKeyError(key, raw, SCENE_KEYS)
-        values[key] = _convert(key, raw)
+            raise UnknownKeyError(key, raw, [*SCENE_KEYS, MATERIAL_KEY])
+        values[key], is_bare = _convert(key, raw)
+        if is_bare:
+            bare.append(key)
 
     if "tilt" not in given and "configuration" in values:
         if values["configuration"] == "vertical" and "angle" in values:
@@ -300,22 +296,29 @@ def make_scene(
             "missing; no value for " + ", ".join(missing) + "; give them or start from a preset",
         )
     try:
-        return Scene(**{_FIELD_OF_KEY[key]: values[key] for key in SCENE_KEYS})
+        scene = Scene(**{_FIELD_OF_KEY[key]: values[key] for key in SCENE_KEYS})
     except SceneError as err:
         # Name the value as the user wrote it (not its SI conversion), and for a check between two
         # keys name the one the user gave.
         key = err.key
-        if key not in given and _PARTNER.get(key) in given:
-            key = _PARTNER[key]
+        if key not in given and PARTNERS.get(key) in given:
+            key = PARTNERS[key]
         if key in given:
             raise SceneError(key, given[key], err.reason) from None
         raise
+    if check_plausible:
+        for key in bare:
+            reason = implausible_reason(key, values[key], given[key])
+            if reason is not None:
+                raise SceneError(key, given[key], reason)
+    return scene
 
 
 class SceneColumns:
     """The scenes of a batch of samples that each set the same numeric keys of one base scene.
 
-    ``SceneColumns(base, columns).scene(i)`` is ``make_scene(row, preset=base)`` for the row
+    ``SceneColumns(base, columns).scene(i)`` is ``make_scene(row, preset=base,
+    check_plausible=False)`` (programmatic SI floats are not checked for plausibility) for the row
     ``row = {key: float(columns[key][i]) for key in columns}`` (:meth:`row`): the same scene, bit
     for bit, and for an invalid row the same error. It exists for the ensemble runner, which
     builds a scene per sample from sampled SI floats: :func:`make_scene` does per row what is
@@ -379,17 +382,17 @@ class SceneColumns:
 
         # Scene.__post_init__'s checks for what a row changes, all rows at once (comparisons
         # with NaN are False, and +-inf fails every range: both go to make_scene, which says
-        # "must be finite").
+        # "must be finite"). The checks between keys are the scalar path's own function, on
+        # the base's values with the columns (and a derived tilt) laid over them.
         ok = np.ones(self._m, dtype=bool)
         for key in self.keys:
             ok &= in_bounds(key, columns[key])
-        if "initial_temperature" in columns or "he.melting_point" in columns:
-            t0 = columns.get("initial_temperature", base.initial_temperature)
-            ok &= t0 < columns.get("he.melting_point", base.he_melting_point)
-        if base.configuration == "vertical" and "tilt" in columns:
-            angles = columns["angle"].tolist() if "angle" in columns else [base.angle] * self._m
-            ok &= np.array([math.isclose(t, a, rel_tol=1e-9, abs_tol=1e-9)  # as __post_init__
-                            for t, a in zip(values[self.keys.index("tilt")], angles)], dtype=bool)
+        if any(k in BETWEEN_KEYS for k in (*self.keys, *self.derived)):
+            between = {k: columns[k] if k in columns else getattr(base, _FIELD_OF_KEY[k])
+                       for k in BETWEEN_KEYS}
+            if follows:
+                between["tilt"] = between["angle"]
+            ok &= between_keys_ok(between)
         self._ok = ok.tolist()
 
     @staticmethod
@@ -397,7 +400,7 @@ class SceneColumns:
         """Whether ``SceneColumns(base, columns)`` applies: `base` a Scene, `columns` dotted
         numeric keys -> 1-D float64 arrays of one length."""
         return (isinstance(base, Scene) and isinstance(columns, Mapping)
-                and all(isinstance(k, str) and k in _BOUNDS for k in columns)
+                and all(isinstance(k, str) and k in _NUMERIC for k in columns)
                 and all(isinstance(v, np.ndarray) and v.ndim == 1 and v.dtype == np.float64
                         for v in columns.values())
                 and len({len(v) for v in columns.values()}) <= 1)
@@ -410,7 +413,8 @@ class SceneColumns:
         return dict(zip(self.keys, self._rows[i]))  # zip stops before a derived tilt
 
     def scene(self, i: int) -> Scene:
-        """The scene of row `i`: ``make_scene(self.row(i), preset=self.base)``.
+        """The scene of row `i`: ``make_scene(self.row(i), preset=self.base,
+        check_plausible=False)``.
 
         Raises
         ------
@@ -418,7 +422,7 @@ class SceneColumns:
             Row `i` is invalid; the error :func:`make_scene` raises for it.
         """
         if not self._ok[i]:
-            return make_scene(self.row(i), preset=self.base)
+            return make_scene(self.row(i), preset=self.base, check_plausible=False)
         # Every value was checked above (or is the validated base's), so the scene is filled in
         # directly rather than through the frozen dataclass's __init__ and __post_init__, which
         # would check all 18 keys again.

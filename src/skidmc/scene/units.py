@@ -25,7 +25,7 @@ import pint
 
 from skidmc.errors import SceneError, UnitError
 
-__all__ = ["from_si", "to_si", "ureg"]
+__all__ = ["from_si", "read_si", "to_si", "ureg"]
 
 #: The package's single unit registry. Offset units are *not* auto-converted in products:
 #: with ``autoconvert_offset_to_baseunit=True`` pint would read ``cal/g/degC`` as per 274.15 K.
@@ -53,18 +53,19 @@ def _dimension_label(unit: pint.Unit) -> str:
     return str(dim) if dim else "dimensionless"
 
 
-def _parse_string(key: str, text: str, expected: pint.Unit) -> pint.Quantity:
-    """Parse ``"28000 psi"``-style text into a quantity; a bare number is taken in `expected`."""
+def _parse_string(key: str, text: str, expected: pint.Unit) -> tuple[pint.Quantity, bool]:
+    """Parse ``"28000 psi"``-style text into a quantity; a bare number is taken in `expected`.
+    The flag says whether it was one (no units)."""
     match = _NUMBER_THEN_UNIT.match(text)
     if match is not None:
         magnitude = float(match["number"])
         unit_text = match["unit"]
         if not unit_text:
-            return ureg.Quantity(magnitude, expected)
+            return ureg.Quantity(magnitude, expected), True
         try:
             # Quantity(magnitude, unit) rather than parsing the product "20 * degC": the product
             # is ambiguous for offset units and pint refuses it, the constructor is not.
-            return ureg.Quantity(magnitude, ureg.parse_units(unit_text))
+            return ureg.Quantity(magnitude, ureg.parse_units(unit_text)), False
         except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError):
             pass  # not a plain unit: maybe an expression such as "6.66e5 cal/mol / (296.16 g/mol)"
     try:
@@ -76,12 +77,14 @@ def _parse_string(key: str, text: str, expected: pint.Unit) -> pint.Quantity:
     except (pint.errors.PintError, ValueError, TypeError, AttributeError, SyntaxError) as exc:
         raise UnitError(key, text, f"cannot parse units ({type(exc).__name__}: {exc})") from None
     if not isinstance(quantity, ureg.Quantity):  # parse_expression returns a number for "2*3"
-        quantity = ureg.Quantity(float(quantity), expected)
-    return quantity
+        return ureg.Quantity(float(quantity), expected), True
+    return quantity, False
 
 
 def to_si(key: str, value: object, expected_unit: str) -> float:
     """Convert one user value to a float in the key's SI unit.
+
+    ``to_si(key, value, unit)`` is ``read_si(key, value, unit)[0]``.
 
     Parameters
     ----------
@@ -110,19 +113,49 @@ def to_si(key: str, value: object, expected_unit: str) -> float:
         The units cannot be parsed, or have the wrong dimension for `key` (an angle unit counts
         as a dimension of its own, so ``"0.1 deg"`` is refused for a dimensionless key).
     """
+    return read_si(key, value, expected_unit)[0]
+
+
+def read_si(key: str, value: object, expected_unit: str) -> tuple[float, bool]:
+    """Convert one user value to SI (as :func:`to_si`), and say whether it was a bare number.
+
+    Parameters
+    ----------
+    key : str
+        Dotted scene key, used only in error messages.
+    value : float, int, str or pint.Quantity
+        As for :func:`to_si`.
+    expected_unit : str
+        The key's SI unit, as pint spells it.
+
+    Returns
+    -------
+    value : float
+        The value in `expected_unit` [expected_unit].
+    bare : bool
+        Whether `value` carried no units (a real number, ``"28000"`` or an expression of
+        numbers), so that it was read in `expected_unit`: the reading a plausibility check
+        (:func:`skidmc.scene.keys.implausible_reason`) is for.
+
+    Raises
+    ------
+    SceneError, UnitError
+        As :func:`to_si`.
+    """
     wanted = "a single number" + (f" in [{expected_unit}]" if expected_unit != "1" else "")
     if isinstance(value, bool) or (hasattr(value, "dtype") and value.dtype.kind == "b"):
         raise SceneError(key, value, f"expected {wanted} or a unit string, got a boolean")
     if isinstance(value, numbers.Real):
         # Before any pint call: a plain number needs no units (ensembles build scenes from
         # floats, and parsing the unit cost ~1 ms per scene).
-        return float(value)
+        return float(value), True
     expected = ureg.parse_units(expected_unit)
+    bare = False
     if isinstance(value, pint.Quantity):
         # Re-create in our registry (a quantity from another registry cannot be converted here).
         quantity = ureg.Quantity(float(value.magnitude), str(value.units))
     elif isinstance(value, str):
-        quantity = _parse_string(key, value, expected)
+        quantity, bare = _parse_string(key, value, expected)
     else:
         raise SceneError(
             key, value, f"expected {wanted} or a unit string, got {type(value).__name__}"
@@ -139,7 +172,9 @@ def to_si(key: str, value: object, expected_unit: str) -> float:
         raise UnitError(key, value, f"cannot convert to {expected_unit}: {exc}") from None
     if not isinstance(magnitude, numbers.Real):
         raise SceneError(key, value, "expected a single number, got an array")
-    return float(magnitude)
+    return float(magnitude), bare
+
+
 
 
 def from_si(value: float, si_unit: str, unit: str) -> float:

@@ -37,6 +37,7 @@ from skidmc.physics.mechanics import (
     STANDARD_GRAVITY,
     impact_constants,
 )
+from skidmc.scene.keys import FIELDS, NUMERIC_KEYS
 from skidmc.solver.model import build_model
 from skidmc.solver.results import HeightResult
 
@@ -48,14 +49,9 @@ __all__ = [
     "theta_history",
 ]
 
-#: Scene attributes in the kernels' argument order.
-SCENE_FIELDS = (
-    "mu", "flow_stress", "billet_mass", "billet_diameter", "angle", "tilt",
-    "initial_temperature", "he_density", "he_heat_capacity", "he_conductivity",
-    "he_heat_of_fusion", "he_melting_point", "kinetics_prefactor",
-    "kinetics_activation_temperature", "kinetics_heat_of_reaction", "target_density",
-    "target_heat_capacity", "target_conductivity",
-)
+#: Scene attributes in the kernels' argument order: the numeric keys in the order of
+#: :data:`skidmc.scene.keys.INPUT_KEYS` (a test checks it against the kernels' signatures).
+SCENE_FIELDS: tuple[str, ...] = tuple(FIELDS[key] for key in NUMERIC_KEYS)
 
 #: The scene's values in the kernels' argument order (a Scene stores validated floats).
 _scene_values = operator.attrgetter(*SCENE_FIELDS)

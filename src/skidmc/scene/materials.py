@@ -1,0 +1,236 @@
+"""Materials: named targets with sourced density, heat capacity and conductivity.
+
+``make_scene(preset="paper-quartz", target="steel")`` sets the three ``target.*`` keys from the
+entry ``"steel"`` of :data:`MATERIALS`; a ``target.*`` key given explicitly still wins. The same
+works as ``skidmc height --preset paper-quartz --set target=steel``, as ``target = "steel"`` in a
+study file's ``[scene]`` or ``[[scenes]]`` table, and ``skidmc materials`` lists the entries.
+
+Values are near room temperature (300 K), written as unit strings in the units of their source,
+so that an entry reads as its source prints it. Each entry names its source (book, table) and
+says how far other sources or grades spread. Adding a material is adding one :class:`Material`
+to :data:`_ENTRIES`; the tests check that every entry converts and builds a valid scene.
+
+Sources
+-------
+- Incropera, DeWitt, Bergman & Lavine, *Fundamentals of Heat and Mass Transfer*, 6th ed.
+  (Wiley, 2007), Appendix A: Table A.1 (metallic solids), A.2 (nonmetallic solids), A.3
+  (common materials), properties at 300 K. Cited as "Incropera Table A.x".
+- The Los Alamos report "Effect of Target Thermal Conductivity and Roughness on the Initiation
+  of PBX 9404 by Oblique Impact", Table VI (the values its calculations used; k in
+  cal/s-cm-degC, read per kelvin: see :mod:`skidmc.scene.presets`). Cited as "report Table VI".
+- ASTM D2442 / IEC 60672-3 alumina grades, typical values as compiled in Shackelford & Doremus
+  (eds.), *Ceramic and Glass Materials: Structure, Properties and Processing* (Springer, 2008).
+- USDA Forest Products Laboratory, *Wood Handbook*, FPL-GTR-190 (2010), ch. 4 (thermal
+  properties of wood).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+from collections.abc import Mapping
+
+from skidmc.errors import SceneError
+
+__all__ = [
+    "MATERIALS",
+    "MATERIAL_KEY",
+    "TARGET_KEYS",
+    "Material",
+    "get_material",
+    "list_materials",
+]
+
+#: The pseudo-key naming a material in :func:`~skidmc.scene.make_scene` and study files.
+MATERIAL_KEY = "target"
+
+#: The scene keys a material sets.
+TARGET_KEYS: tuple[str, ...] = ("target.density", "target.heat_capacity", "target.conductivity")
+
+
+@dataclasses.dataclass(frozen=True)
+class Material:
+    """A named target material.
+
+    Attributes
+    ----------
+    name : str
+        Registry name (``"steel"``), the value of ``target = ...``.
+    description : str
+        What the material is (grade, temper, form).
+    density, heat_capacity, conductivity : str
+        Unit strings, in the units of the source [mass / volume, energy / (mass temperature),
+        power / (length temperature)].
+    source : str
+        Book (or report) and table the three values come from.
+    spread : str
+        How far other sources, grades or conditions move the values.
+    """
+
+    name: str
+    description: str
+    density: str
+    heat_capacity: str
+    conductivity: str
+    source: str
+    spread: str
+
+    @property
+    def values(self) -> dict[str, str]:
+        """The scene overrides: :data:`TARGET_KEYS` -> unit strings."""
+        return dict(zip(TARGET_KEYS, (self.density, self.heat_capacity, self.conductivity)))
+
+
+_INCROPERA = ("Incropera, DeWitt, Bergman & Lavine, Fundamentals of Heat and Mass Transfer, "
+              "6th ed. (2007)")
+_REPORT = ("LA report 'Effect of Target Thermal Conductivity and Roughness on the Initiation of "
+           "PBX 9404 by Oblique Impact'")
+
+_ENTRIES: tuple[Material, ...] = (
+    # --- metals --------------------------------------------------------------------------------
+    Material(
+        "gold", "pure gold",
+        "19300 kg/m^3", "129 J/(kg K)", "317 W/(m K)",
+        f"{_INCROPERA}, Table A.1 (gold, 300 K)",
+        "pure metal: handbooks agree within a few percent; impurities (electroplated or alloyed "
+        "gold) lower k."),
+    Material(
+        "gold-report", "the report's gold target, as its calculations took it",
+        "19.3 g/cm^3", "0.0316 cal/g/K", "7.03e-1 cal/s/cm/K",
+        f"{_REPORT}, Table VI (gold)",
+        "k = 294 W/(m K), 7 % below handbook gold (317 W/(m K), Incropera Table A.1). The real "
+        "target was 3 mil of gold on 7 mil of copper on Dural (report Sec. III); see docs/"
+        "inputs.md for why its effective k lies between Dural and copper."),
+    Material(
+        "copper", "pure copper",
+        "8933 kg/m^3", "385 J/(kg K)", "401 W/(m K)",
+        f"{_INCROPERA}, Table A.1 (copper, pure, 300 K)",
+        "commercial and electroplated coppers a few percent lower; copper alloys far lower "
+        "(cartridge brass 110, bronzes about 50 W/(m K), same table)."),
+    Material(
+        "aluminium-2024", "aluminium alloy 2024-T6 (Al-4.5Cu-1.5Mg-0.6Mn, 'Dural')",
+        "2770 kg/m^3", "875 J/(kg K)", "177 W/(m K)",
+        f"{_INCROPERA}, Table A.1 (aluminum alloy 2024-T6, 300 K)",
+        "k depends on temper: ASM Handbook Vol. 2 (Properties and Selection: Nonferrous Alloys) "
+        "lists about 120 W/(m K) for 2024-T3/T4 sheet, about 150 for T6 and about 190 "
+        "annealed (O); pure aluminium is 237 W/(m K) (Incropera Table A.1)."),
+    Material(
+        "steel", "plain carbon steel (Mn <= 1 %, Si <= 0.1 %)",
+        "7854 kg/m^3", "434 J/(kg K)", "60.5 W/(m K)",
+        f"{_INCROPERA}, Table A.1 (plain carbon steel, 300 K)",
+        "AISI 1010 63.9 W/(m K); medium-carbon and low-alloy steels about 40-50 W/(m K) "
+        "(same table)."),
+    Material(
+        "stainless-304", "austenitic stainless steel AISI 304",
+        "7900 kg/m^3", "477 J/(kg K)", "14.9 W/(m K)",
+        f"{_INCROPERA}, Table A.1 (AISI 304, 300 K)",
+        "other austenitic grades 13-15 W/(m K) (AISI 316 13.4, AISI 347 14.2, same table)."),
+    # --- ceramics and glasses ------------------------------------------------------------------
+    Material(
+        "alumina-99.5", "dense high-purity polycrystalline alumina (99.5 % grades approach it)",
+        "3970 kg/m^3", "765 J/(kg K)", "36.0 W/(m K)",
+        f"{_INCROPERA}, Table A.2 (aluminum oxide, polycrystalline, 300 K)",
+        "the table's density is alumina's theoretical one; commercial 99.5 % grades are "
+        "slightly porous (about 3.9 g/cm^3) and list up to about 30 W/(m K), lower purities "
+        "less (ASTM D2442 grades, see alumina-94). Sapphire: 46 W/(m K) (Incropera Table A.2)."),
+    Material(
+        "alumina-94", "93-95 % alumina (ASTM D2442 Type II, IEC 60672-3 C-786)",
+        "3.7 g/cm^3", "900 J/(kg K)", "19 W/(m K)",
+        "ASTM D2442 Type II / IEC 60672-3 C-786 typical values, as compiled in Shackelford & "
+        "Doremus (eds.), Ceramic and Glass Materials (Springer, 2008)",
+        "engineering alumina grades from about 85 to 99.5 % span 14-30 W/(m K) and "
+        "870-940 J/(kg K) near room temperature (same compilation)."),
+    Material(
+        "alumina-85-report", "the report's 85 % alumina (Coors; 15 % silica, magnesia, calcia)",
+        "3.40 g/cm^3", "0.18 cal/g/K", "2.1e-2 cal/s/cm/K",
+        f"{_REPORT}, Table VI (aluminum oxide) and Sec. III (grade)",
+        "k = 8.8 W/(m K): below every handbook alumina grade (14-30 W/(m K), ASTM D2442 grades); "
+        "the report does not say where its value comes from."),
+    Material(
+        "fused-quartz", "fused quartz (vitreous silica)",
+        "2220 kg/m^3", "745 J/(kg K)", "1.38 W/(m K)",
+        f"{_INCROPERA}, Table A.2 (silicon dioxide, polycrystalline (fused silica), 300 K)",
+        "k rises with temperature: about 1.1 W/(m K) at 200 K and 1.5 at 400 K in the same "
+        "table, so handbook values near room temperature read 1.1-1.4 W/(m K)."),
+    Material(
+        "quartz-report", "the report's fused-quartz target, as its calculations took it",
+        "2.67 g/cm^3", "0.188 cal/g/K", "4.05e-3 cal/s/cm/K",
+        f"{_REPORT}, Table VI (quartz)",
+        "k = 1.69 W/(m K), above handbook fused quartz at room temperature (1.38 W/(m K) at "
+        "300 K, Incropera Table A.2; the table reaches 1.69 only between 400 and 600 K); the "
+        "density is crystalline quartz's (2650 kg/m^3, same table), not fused silica's (2220)."),
+    Material(
+        "soda-lime-glass", "soda-lime plate glass",
+        "2500 kg/m^3", "750 J/(kg K)", "1.4 W/(m K)",
+        f"{_INCROPERA}, Table A.3 (glass, plate (soda lime), 300 K)",
+        "composition-dependent; other compilations give c about 840 J/(kg K) (Callister, "
+        "Materials Science and Engineering, Table B.8)."),
+    # --- building materials and others ---------------------------------------------------------
+    Material(
+        "concrete", "concrete, stone mix",
+        "2300 kg/m^3", "880 J/(kg K)", "1.4 W/(m K)",
+        f"{_INCROPERA}, Table A.3 (concrete (stone mix), 300 K)",
+        "aggregate and moisture move k by tens of percent; c 850-1150 J/(kg K) (Callister, "
+        "Table B.8)."),
+    Material(
+        "granite", "granite (Barre)",
+        "2630 kg/m^3", "775 J/(kg K)", "2.79 W/(m K)",
+        f"{_INCROPERA}, Table A.3 (granite, Barre, 300 K)",
+        "rocks vary with their mineral content: the same table's limestone, marble, sandstone "
+        "and quartzite span about 2-5.4 W/(m K)."),
+    Material(
+        "oak", "hardwood (oak, maple), across the grain",
+        "720 kg/m^3", "1255 J/(kg K)", "0.16 W/(m K)",
+        f"{_INCROPERA}, Table A.3 (structural building materials, hardwoods (oak, maple))",
+        "k varies about 20 % between species and rises with density and moisture; along the "
+        "grain it is 1.5-2.8 times the value across (USDA Wood Handbook, FPL-GTR-190, ch. 4)."),
+    Material(
+        "pine", "softwood (fir, pine), across the grain",
+        "510 kg/m^3", "1380 J/(kg K)", "0.12 W/(m K)",
+        f"{_INCROPERA}, Table A.3 (structural building materials, softwoods (fir, pine))",
+        "as oak: about 20 % between species, 1.5-2.8 times higher along the grain (USDA Wood "
+        "Handbook, ch. 4)."),
+    Material(
+        "rubber", "soft vulcanized rubber (as a rubber floor covering)",
+        "1100 kg/m^3", "2010 J/(kg K)", "0.13 W/(m K)",
+        f"{_INCROPERA}, Table A.3 (rubber, vulcanized, soft, 300 K)",
+        "hard rubber 1190 kg/m^3 and 0.16 W/(m K) (same table); fillers in floor tiles raise "
+        "density and k."),
+)
+
+#: Name -> :class:`Material`, in the order above.
+MATERIALS: Mapping[str, Material] = {m.name: m for m in _ENTRIES}
+
+
+def list_materials() -> list[str]:
+    """Names of the materials, in the order of :data:`MATERIALS`."""
+    return list(MATERIALS)
+
+
+def get_material(name: object) -> Material:
+    """The material called `name`.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`MATERIALS`.
+
+    Returns
+    -------
+    Material
+
+    Raises
+    ------
+    SceneError
+        `name` is not a material name; the message (key ``target``) suggests close matches and
+        lists the materials.
+    """
+    if isinstance(name, str) and name in MATERIALS:
+        return MATERIALS[name]
+    if not isinstance(name, str):
+        raise SceneError(MATERIAL_KEY, name, "expected a material name (skidmc materials lists "
+                         "them: " + ", ".join(MATERIALS) + ")")
+    close = difflib.get_close_matches(name.strip().lower(), list(MATERIALS), n=3, cutoff=0.5)
+    hint = ("did you mean " + " or ".join(repr(c) for c in close) + "? ") if close else ""
+    raise SceneError(MATERIAL_KEY, name,
+                     f"unknown material; {hint}materials: " + ", ".join(MATERIALS))
