@@ -69,21 +69,34 @@ target material, ``target = "steel"`` (:mod:`skidmc.scene.materials`).
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import hashlib
 import math
 import numbers
 import re
 from collections.abc import Mapping
-from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import scipy.stats
 
-from skidmc.errors import SceneError, SkidmcError
-from skidmc.scene import SCENE_KEYS, SI_UNITS, Scene, make_scene
+from skidmc.ensemble.study_model import (
+    DESIGN_METHODS,
+    EXTRA_KEYS,
+    RATE_AT_REFERENCE,
+    STUDY_RANGES,
+    U_TAIL,
+    Correlation,
+    DesignSpec,
+    Distribution,
+    SolverOptions,
+    Study,
+    StudyError,
+    StudyScene,
+    check_n,
+)
+from skidmc.errors import SceneError
+from skidmc.scene import SCENE_KEYS, SI_UNITS, make_scene
 from skidmc.scene.keys import implausible_reason
 from skidmc.scene.units import read_si, to_si
 
@@ -96,6 +109,7 @@ __all__ = [
     "DESIGN_METHODS",
     "EXTRA_KEYS",
     "RATE_AT_REFERENCE",
+    "U_TAIL",
     "Correlation",
     "DesignSpec",
     "Distribution",
@@ -106,32 +120,6 @@ __all__ = [
     "load_study",
     "parse_study",
 ]
-
-#: Design methods (:mod:`skidmc.ensemble.sampling`).
-DESIGN_METHODS: tuple[str, ...] = ("mc", "lhs", "sobol", "saltelli")
-
-#: Pseudo-key sampled instead of ``kinetics.prefactor``: the Arrhenius rate at a reference
-#: temperature, k_ref = Z exp(-E/R / T_ref) [1/s]. Fitted (E, Z) pairs of one material fall
-#: along ln Z ~ E / (R T_iso) (the kinetic compensation effect; for HMX: Brill, Gongwer &
-#: Williams, J. Phys. Chem. 98 (1994) 12242), so the rate near the measured temperatures is
-#: far better known than Z; docs/inputs.md, "Kinetics".
-RATE_AT_REFERENCE = "kinetics.rate_at_reference"
-
-#: Sampled keys that are not scene keys: key -> (SI unit, long name).
-EXTRA_KEYS: dict[str, tuple[str, str]] = {
-    RATE_AT_REFERENCE: (
-        "1/s",
-        "Arrhenius rate constant at the reference temperature, Z exp(-E/R / T_ref)",
-    ),
-}
-
-#: Tail quantile at which distributions are checked against the physical range, and at which
-#: the sampling truncates the design (so that the check covers every sample) [1].
-U_TAIL = 1e-9
-
-# Study-level physical ranges stricter than the scene layer's: a friction coefficient that a
-# distribution may reach (the scene accepts up to 5 to catch typos, not as physics).
-_STUDY_RANGES: dict[str, tuple[float, float]] = {"mu": (0.0, 1.0)}
 
 _TOP_LEVEL = ("study", "scene", "scenes", "uncertain", "correlation", "design", "solver")
 _STUDY_KEYS = ("name", "description")
@@ -146,259 +134,6 @@ _NUMBER_THEN_UNIT = re.compile(r"^\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\s
 _NO_VALUE = object()
 
 
-class StudyError(SkidmcError, ValueError):
-    """A study file that cannot be run: the message names the file, the key and the value.
-
-    Parameters
-    ----------
-    file : str
-        The study file (or ``"<string>"`` for text parsed directly).
-    key : str
-        Where in the file, TOML-style (``uncertain."he.conductivity".scale``).
-    value : object
-        The value as written in the file; ``None`` when the key is missing.
-    reason : str
-        What is wrong, phrased as the rule it breaks, with a hint where one helps.
-
-    Attributes
-    ----------
-    file, key, value, reason
-        As given; ``str(err)`` is ``"{file}: {key} = {value!r}: {reason}"``.
-    """
-
-    def __init__(self, file: str, key: str, value: object, reason: str) -> None:
-        self.file = str(file)
-        self.key = key
-        self.value = value
-        self.reason = reason
-        shown = f"{key}" if value is None else f"{key} = {value!r}"
-        super().__init__(f"{self.file}: {shown}: {reason}")
-
-    def __reduce__(self):
-        return (type(self), (self.file, self.key, self.value, self.reason))
-
-
-def _toml_key(*parts: str | int) -> str:
-    """Dotted TOML path for messages; parts holding a dot are quoted (``uncertain."he.k"``)."""
-    out = []
-    for part in parts:
-        if isinstance(part, int):
-            out[-1] += f"[{part}]"
-        elif re.fullmatch(r"[A-Za-z0-9_-]+", part):
-            out.append(part)
-        else:
-            out.append(f'"{part}"')
-    return ".".join(out)
-
-
-def _suggest(word: str, options) -> str:
-    close = difflib.get_close_matches(word, list(options), n=3, cutoff=0.6)
-    if close:
-        return "did you mean " + " or ".join(repr(c) for c in close) + "?"
-    return "expected one of " + ", ".join(repr(o) for o in options)
-
-
-# --- the parts of a study -----------------------------------------------------------------------
-
-
-@dataclasses.dataclass(frozen=True)
-class Distribution:
-    """The distribution of one uncertain input.
-
-    Attributes
-    ----------
-    key : str
-        Scene key, or :data:`RATE_AT_REFERENCE`.
-    name : str
-        Name of a :mod:`scipy.stats` continuous distribution (``"truncnorm"``).
-    params : tuple of (str, float)
-        scipy's parameters (shapes, ``loc``, ``scale``) in the key's SI unit, or of the factor
-        when `relative`.
-    source : str
-        Where the width comes from.
-    relative : bool
-        The distribution is of a dimensionless factor on the scene's nominal value.
-    reference_temperature : float or None
-        T_ref for :data:`RATE_AT_REFERENCE` [K].
-    """
-
-    key: str
-    name: str
-    params: tuple[tuple[str, float], ...]
-    source: str
-    relative: bool = False
-    reference_temperature: float | None = None
-
-    @cached_property
-    def frozen(self):
-        """The frozen :mod:`scipy.stats` distribution."""
-        return getattr(scipy.stats, self.name)(**dict(self.params))
-
-    def ppf(self, u: np.ndarray, nominal: float = 1.0) -> np.ndarray:
-        """Values at the quantiles `u`; times `nominal` when relative [SI unit of the key]."""
-        x = self.frozen.ppf(u)
-        return x * nominal if self.relative else x
-
-    def describe(self) -> str:
-        """``"lognorm(s=0.2) x nominal"``-style one-liner."""
-        args = ", ".join(f"{k}={v:.6g}" for k, v in self.params)
-        return f"{self.name}({args})" + (" x nominal" if self.relative else "")
-
-
-@dataclasses.dataclass(frozen=True)
-class Correlation:
-    """A Gaussian-copula correlation between two uncertain inputs.
-
-    Attributes
-    ----------
-    keys : tuple of str
-        The two keys.
-    rho : float
-        Correlation of the copula's normal scores [1].
-    spearman : float or None
-        The rank correlation it was given as, if so [1]; rho = 2 sin(pi rs / 6).
-    source : str
-        Where it comes from.
-    """
-
-    keys: tuple[str, str]
-    rho: float
-    spearman: float | None
-    source: str
-
-
-@dataclasses.dataclass(frozen=True)
-class DesignSpec:
-    """How the samples are drawn (:mod:`skidmc.ensemble.sampling`).
-
-    Attributes
-    ----------
-    method : {"mc", "lhs", "sobol", "saltelli"}
-    n : int
-        Number of samples; for ``saltelli`` the base sample count N.
-    seed : int
-        Seed of :class:`numpy.random.SeedSequence` (>= 0).
-    second_order : bool
-        ``saltelli`` only: rows for second-order indices too.
-    """
-
-    method: str
-    n: int
-    seed: int
-    second_order: bool = True
-
-
-@dataclasses.dataclass(frozen=True)
-class SolverOptions:
-    """Arguments of :func:`skidmc.solver.critical_height` for every sample.
-
-    Attributes
-    ----------
-    rtol : float
-        Relative tolerance on the critical height [1].
-    tier : str
-        Model fidelity tier.
-    h_min, h_max : float
-        Search bounds [m]; results beyond them are censored.
-    """
-
-    rtol: float = 1e-3
-    tier: str = "full"
-    h_min: float = 1e-3
-    h_max: float = 1e4
-
-    def as_kwargs(self) -> dict:
-        """Keyword arguments for :func:`skidmc.solver.critical_height`."""
-        return dataclasses.asdict(self)
-
-
-@dataclasses.dataclass(frozen=True)
-class StudyScene:
-    """One scene of a study with the distributions that apply to it.
-
-    Attributes
-    ----------
-    name : str
-        Scene name (the preset name for a single ``[scene]`` without one).
-    scene : Scene
-        The nominal scene.
-    uncertain : dict
-        Key -> :class:`Distribution` (study-wide ones, overridden by the scene's own).
-    """
-
-    name: str
-    scene: Scene
-    uncertain: Mapping[str, Distribution]
-
-    def nominal(self, key: str) -> float:
-        """The scene's value of `key` [SI]; for :data:`RATE_AT_REFERENCE`, k(T_ref) of the scene."""
-        values = self.scene.as_dict()
-        if key == RATE_AT_REFERENCE:
-            t_ref = self.uncertain[key].reference_temperature
-            return values["kinetics.prefactor"] * math.exp(
-                -values["kinetics.activation_temperature"] / t_ref
-            )
-        return values[key]
-
-
-@dataclasses.dataclass(frozen=True)
-class Study:
-    """A validated study (build with :func:`load_study` or :func:`parse_study`).
-
-    Attributes
-    ----------
-    name, description : str
-    scenes : tuple of StudyScene
-    scene_dimension : bool
-        True for ``[[scenes]]`` (storage gets a ``scene`` dimension), False for ``[scene]``.
-    keys : tuple of str
-        The uncertain keys in design-column order (all scenes together).
-    correlations : tuple of Correlation
-    design : DesignSpec
-    solver : SolverOptions
-    text : str
-        The study file's full text.
-    sha256 : str
-        Hex digest of `text` (UTF-8), identifies the study in result files.
-    file : str
-        Where it was read from (``"<string>"`` if parsed from text).
-    """
-
-    name: str
-    description: str
-    scenes: tuple[StudyScene, ...]
-    scene_dimension: bool
-    keys: tuple[str, ...]
-    correlations: tuple[Correlation, ...]
-    design: DesignSpec
-    solver: SolverOptions
-    text: str
-    sha256: str
-    file: str
-
-    @property
-    def scene_names(self) -> tuple[str, ...]:
-        """Names of the scenes, in order."""
-        return tuple(s.name for s in self.scenes)
-
-    @property
-    def n_rows(self) -> int:
-        """Number of samples per scene in the design (``saltelli``: N (2d + 2) or N (d + 2))."""
-        d = self.design
-        if d.method == "saltelli":
-            return d.n * (2 * len(self.keys) + 2 if d.second_order else len(self.keys) + 2)
-        return d.n
-
-    def with_n(self, n: int) -> Study:
-        """The same study with another sample count, validated as if written in the file.
-
-        Raises
-        ------
-        StudyError
-            `n` is not a valid count for the design (e.g. not a power of 2 for ``sobol``).
-        """
-        _check_n(self.file, self.design.method, n, key="n (--n)")
-        return dataclasses.replace(self, design=dataclasses.replace(self.design, n=int(n)))
 
 
 # --- loading --------------------------------------------------------------------------------------
@@ -453,6 +188,26 @@ def parse_study(text: str, file: str = "<string>") -> Study:
     except tomllib.TOMLDecodeError as exc:
         raise StudyError(file, "(syntax)", None, f"not valid TOML: {exc}") from None
     return _Parser(file, doc).study(text)
+
+
+def _toml_key(*parts: str | int) -> str:
+    """Dotted TOML path for messages; parts holding a dot are quoted (``uncertain."he.k"``)."""
+    out = []
+    for part in parts:
+        if isinstance(part, int):
+            out[-1] += f"[{part}]"
+        elif re.fullmatch(r"[A-Za-z0-9_-]+", part):
+            out.append(part)
+        else:
+            out.append(f'"{part}"')
+    return ".".join(out)
+
+
+def _suggest(word: str, options) -> str:
+    close = difflib.get_close_matches(word, list(options), n=3, cutoff=0.6)
+    if close:
+        return "did you mean " + " or ".join(repr(c) for c in close) + "?"
+    return "expected one of " + ", ".join(repr(o) for o in options)
 
 
 class _Parser:
@@ -728,8 +483,8 @@ class _Parser:
             reason = None
             if not math.isfinite(x):
                 reason = "is not finite there"
-            elif d.key in _STUDY_RANGES:
-                lo, hi = _STUDY_RANGES[d.key]
+            elif d.key in STUDY_RANGES:
+                lo, hi = STUDY_RANGES[d.key]
                 if not lo < x < hi:
                     reason = f"a sampled {d.key} must lie in ({lo:g}, {hi:g})"
             if reason is None and d.key in SI_UNITS:
@@ -830,7 +585,7 @@ class _Parser:
         if method not in DESIGN_METHODS:
             raise self.error("design.method", method, _suggest(method, DESIGN_METHODS))
         n = table.get("n")
-        _check_n(self.file, method, n, key="design.n")
+        check_n(self.file, method, n, key="design.n")
         seed = table.get("seed")
         if seed is None:
             raise self.error("design.seed", None, "missing: a study must be reproducible "
@@ -865,16 +620,6 @@ class _Parser:
             raise self.error("solver.h_min", table.get("h_min", defaults.h_min),
                              f"must be below h_max ({bounds['h_max']:g} m)")
         return SolverOptions(rtol=float(rtol), tier=tier, **bounds)
-
-
-def _check_n(file: str, method: str, n: object, key: str) -> None:
-    if n is None:
-        raise StudyError(file, key, None, "missing: the number of samples")
-    if isinstance(n, bool) or not isinstance(n, numbers.Integral) or n < 1:
-        raise StudyError(file, key, n, "expected an integer >= 1")
-    if method in ("sobol", "saltelli") and n & (n - 1):
-        raise StudyError(file, key, n, f"the {method} design needs a power of 2 (keeps the "
-                         f"Sobol sequence balanced): e.g. {1 << (int(n) - 1).bit_length()}")
 
 
 def _solver_tiers() -> tuple[str, ...]:
