@@ -15,6 +15,7 @@ run with a :class:`StudyError` naming the file, the key and the value. The forma
     # [[scenes]]                        # ... or several named scenes (storage dimension `scene`)
     # name = "gold"
     # preset = "paper-gold"
+    # experiment = "gold"               # compared with the report's drops in `skidmc report`
     # [scenes.uncertain."target.conductivity"]   # a distribution for this scene only
     # ...
 
@@ -23,6 +24,8 @@ run with a :class:`StudyError` naming the file, the key and the value. The forma
     s = 0.2                             # scipy's parameter names (shapes, loc, scale)
     relative = true                     # the distribution is of a factor on each scene's value
     source = "report Sec. IV: least reproducible input"   # mandatory
+    kind = "aleatory"                   # varies drop to drop (default) or "epistemic": fixed
+                                        # but unknown (kinetics, properties); both -> nested
 
     [uncertain."kinetics.activation_temperature"]
     distribution = "uniform"
@@ -46,6 +49,8 @@ run with a :class:`StudyError` naming the file, the key and the value. The forma
     method = "lhs"                      # mc | lhs | sobol | saltelli
     n = 256                             # samples (saltelli: base samples N, N (2d + 2) rows)
     seed = 20240601
+    # n_epistemic = 32                  # with aleatory AND epistemic inputs: outer draws, each
+    #                                   # with n aleatory samples (32 x 256 rows)
 
     [solver]                            # skidmc.solver.critical_height arguments
     rtol = 1e-2
@@ -82,6 +87,7 @@ import scipy.stats
 
 from skidmc.ensemble.study_model import (
     DESIGN_METHODS,
+    KINDS,
     EXTRA_KEYS,
     RATE_AT_REFERENCE,
     STUDY_RANGES,
@@ -123,9 +129,9 @@ __all__ = [
 
 _TOP_LEVEL = ("study", "scene", "scenes", "uncertain", "correlation", "design", "solver")
 _STUDY_KEYS = ("name", "description")
-_SCENE_RESERVED = ("name", "preset", "uncertain")
-_DIST_META = ("distribution", "source", "relative", "reference_temperature")
-_DESIGN_KEYS = ("method", "n", "seed", "second_order")
+_SCENE_RESERVED = ("name", "preset", "uncertain", "experiment")
+_DIST_META = ("distribution", "source", "relative", "reference_temperature", "kind")
+_DESIGN_KEYS = ("method", "n", "seed", "second_order", "n_epistemic")
 _SOLVER_KEYS = ("rtol", "tier", "h_min", "h_max")
 _CORRELATION_KEYS = ("keys", "spearman", "gaussian", "source")
 _NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
@@ -272,6 +278,7 @@ class _Parser:
                              "the saltelli design needs independent inputs (Sobol indices are "
                              "defined for them); sample kinetics.rate_at_reference instead of "
                              "correlating the kinetics pair, or use mc/lhs/sobol")
+        self.check_kinds(scenes, keys, design, correlations)
         solver = self.solver(doc.get("solver", {}))
         return Study(
             name=name, description=description, scenes=scenes,
@@ -279,6 +286,31 @@ class _Parser:
             design=design, solver=solver, text=text,
             sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(), file=self.file,
         )
+
+    def check_kinds(self, scenes, keys, design: DesignSpec, correlations) -> None:
+        """Aleatory and epistemic inputs: one kind per key; both present <=> a nested design."""
+        kinds: dict[str, str] = {}
+        for sc in scenes:
+            for key, dist in sc.uncertain.items():
+                if kinds.setdefault(key, dist.kind) != dist.kind:
+                    raise self.error(_toml_key("uncertain", key, "kind"), dist.kind,
+                                     f"{key} is {kinds[key]} in another scene: one kind per "
+                                     "input across the study")
+        both = len(set(kinds.values())) == 2
+        if both and not design.n_epistemic:
+            epistemic = [k for k in keys if kinds[k] == "epistemic"]
+            raise self.error("design.n_epistemic", None,
+                             f"missing: {', '.join(epistemic)} are epistemic and the other "
+                             "inputs aleatory, so the design nests; give the number of epistemic "
+                             "draws (each gets design.n aleatory samples)")
+        if design.n_epistemic and not both:
+            raise self.error("design.n_epistemic", design.n_epistemic,
+                             "only for a study with both aleatory and epistemic inputs (mark "
+                             "each [uncertain.KEY] with kind = 'aleatory' or 'epistemic')")
+        for c in correlations:
+            if kinds[c.keys[0]] != kinds[c.keys[1]]:
+                raise self.error("correlation", list(c.keys), "correlates an aleatory with an "
+                                 "epistemic input: a nested design draws them at different levels")
 
     # -- scenes
 
@@ -326,7 +358,12 @@ class _Parser:
             raise self.error(_toml_key(*where, "uncertain"), None,
                              "kinetics.prefactor and kinetics.rate_at_reference are both "
                              "uncertain in this scene (one study-wide, one its own): keep one")
-        sc = StudyScene(name=name or preset or "scene", scene=scene, uncertain=uncertain)
+        experiment = table.get("experiment")
+        if experiment is not None and not isinstance(experiment, str):
+            raise self.error(_toml_key(*where, "experiment"), experiment,
+                             "expected the name of an experiment (skidmc.analysis.experiments)")
+        sc = StudyScene(name=name or preset or "scene", scene=scene, uncertain=uncertain,
+                        experiment=experiment)
         self.check_rate_reference(sc)  # first: a bad T_ref also spoils the rate's support
         for key, dist in uncertain.items():
             origin = (*where, "uncertain", key) if key in own else ("uncertain", key)
@@ -386,6 +423,10 @@ class _Parser:
         relative = spec.get("relative", False)
         if not isinstance(relative, bool):
             raise self.error(where + ".relative", relative, "expected true or false")
+        kind = spec.get("kind", "aleatory")
+        if kind not in KINDS:
+            raise self.error(where + ".kind", kind, "expected 'aleatory' (varies from drop to "
+                             "drop) or 'epistemic' (fixed but unknown)")
         shapes = [s.strip() for s in (dist.shapes or "").split(",") if s.strip()]
         allowed = (*shapes, "loc", "scale")
         given = {k: v for k, v in spec.items() if k not in _DIST_META}
@@ -436,7 +477,7 @@ class _Parser:
                                      difference=role == "difference")
         params = {p: params[p] for p in allowed if p in params}  # scipy's order
         d = Distribution(key=key, name=name, params=tuple(params.items()), source=source,
-                         relative=relative, reference_temperature=t_ref)
+                         relative=relative, reference_temperature=t_ref, kind=kind)
         lo, hi = d.frozen.support()
         if np.isnan(lo) or np.isnan(hi) or not np.isfinite(d.frozen.ppf(0.5)):
             raise self.error(where, spec, f"invalid parameters for scipy.stats.{name} "
@@ -597,7 +638,16 @@ class _Parser:
             raise self.error("design.second_order", second, "expected true or false")
         if "second_order" in table and method != "saltelli":
             raise self.error("design.second_order", second, "only for method = 'saltelli'")
-        return DesignSpec(method=method, n=n, seed=seed, second_order=second)
+        n_epistemic = table.get("n_epistemic", 0)
+        if "n_epistemic" in table:
+            if isinstance(n_epistemic, bool) or not isinstance(n_epistemic, int) or n_epistemic < 2:
+                raise self.error("design.n_epistemic", n_epistemic, "expected an integer >= 2 "
+                                 "(epistemic draws, each with n aleatory samples)")
+            if method == "saltelli":
+                raise self.error("design.n_epistemic", n_epistemic, "a nested design takes mc, "
+                                 "lhs or sobol, not saltelli")
+        return DesignSpec(method=method, n=n, seed=seed, second_order=second,
+                          n_epistemic=n_epistemic)
 
     def solver(self, table: object) -> SolverOptions:
         table = self.table(table, "solver")

@@ -21,6 +21,7 @@ from skidmc.scene import Scene
 
 __all__ = [
     "DESIGN_METHODS",
+    "KINDS",
     "EXTRA_KEYS",
     "RATE_AT_REFERENCE",
     "Correlation",
@@ -33,6 +34,9 @@ __all__ = [
     "STUDY_RANGES",
     "check_n",
 ]
+
+#: How an uncertain input is drawn: varying from drop to drop, or fixed but unknown.
+KINDS: tuple[str, ...] = ("aleatory", "epistemic")
 
 #: Design methods (:mod:`skidmc.ensemble.sampling`).
 DESIGN_METHODS: tuple[str, ...] = ("mc", "lhs", "sobol", "saltelli")
@@ -114,6 +118,9 @@ class Distribution:
         The distribution is of a dimensionless factor on the scene's nominal value.
     reference_temperature : float or None
         T_ref for :data:`RATE_AT_REFERENCE` [K].
+    kind : {"aleatory", "epistemic"}
+        Varies from drop to drop (friction of the spot hit, flow stress lot, angle, temperature)
+        or is fixed but unknown (kinetics, material properties).
     """
 
     key: str
@@ -122,6 +129,7 @@ class Distribution:
     source: str
     relative: bool = False
     reference_temperature: float | None = None
+    kind: str = "aleatory"
 
     @cached_property
     def frozen(self):
@@ -174,12 +182,15 @@ class DesignSpec:
         Seed of :class:`numpy.random.SeedSequence` (>= 0).
     second_order : bool
         ``saltelli`` only: rows for second-order indices too.
+    n_epistemic : int
+        Epistemic draws of a nested design (0: not nested); each gets `n` aleatory samples.
     """
 
     method: str
     n: int
     seed: int
     second_order: bool = True
+    n_epistemic: int = 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -218,11 +229,14 @@ class StudyScene:
         The nominal scene.
     uncertain : dict
         Key -> :class:`Distribution` (study-wide ones, overridden by the scene's own).
+    experiment : str or None
+        The report's experiment this scene is compared with (``skidmc report``).
     """
 
     name: str
     scene: Scene
     uncertain: Mapping[str, Distribution]
+    experiment: str | None = None
 
     def nominal(self, key: str) -> float:
         """The scene's value of `key` [SI]; for :data:`RATE_AT_REFERENCE`, k(T_ref) of the scene."""
@@ -279,9 +293,23 @@ class Study:
     def n_rows(self) -> int:
         """Number of samples per scene in the design (``saltelli``: N (2d + 2) or N (d + 2))."""
         d = self.design
+        if d.n_epistemic:
+            return d.n_epistemic * d.n
         if d.method == "saltelli":
             return d.n * (2 * len(self.keys) + 2 if d.second_order else len(self.keys) + 2)
         return d.n
+
+    def kind(self, key: str) -> str:
+        """``"aleatory"`` or ``"epistemic"``: how the uncertain input `key` is drawn."""
+        for sc in self.scenes:
+            if key in sc.uncertain:
+                return sc.uncertain[key].kind
+        raise KeyError(key)
+
+    @property
+    def nested(self) -> bool:
+        """Whether the design nests aleatory draws inside epistemic ones."""
+        return bool(self.design.n_epistemic)
 
     def with_n(self, n: int) -> Study:
         """The same study with another sample count, validated as if written in the file.
