@@ -56,7 +56,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import signal
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -400,8 +402,9 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                 del todo
                 outcome = "interrupted"
                 try:
-                    _evaluate_chunks(study, file, executor, schedule, report, progress, t0,
-                                     solver)
+                    with _DeferredInterrupt() as interrupt:
+                        _evaluate_chunks(study, file, executor, schedule, report, progress, t0,
+                                         solver, interrupt.check)
                     outcome = "finished"
                 finally:
                     file.add_history(f"{timestamp()} skidmc {__version__}: {outcome}: "
@@ -452,12 +455,46 @@ class _Draws:
         return [{k: v[a:b] for k, v in d.items()} for d in self._block]
 
 
+class _DeferredInterrupt:
+    """SIGINT handling of the chunk loop: the first Ctrl-C stops the run at the next safe point
+    (:meth:`check`, after a chunk is written), not wherever Python happens to be: a
+    KeyboardInterrupt raised inside a weakref callback or a ``__del__`` (the executor's
+    machinery has both) is printed as "Exception ignored" and lost, and the run went on. A second
+    Ctrl-C raises at once. Installed only from the main thread over Python's default handler
+    (a custom handler, e.g. a notebook's, is left alone)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._old = None
+
+    def __enter__(self) -> _DeferredInterrupt:
+        if threading.current_thread() is threading.main_thread() \
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._old = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt if Ctrl-C was pressed."""
+        if self.requested:
+            raise KeyboardInterrupt
+
+    def __exit__(self, *exc) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+
+
 def _evaluate_chunks(study: Study, file: EnsembleFile, executor, schedule: Schedule,
                      report: RunReport, progress: bool | None, t0: float | None = None,
-                     solver: Callable | None = None) -> None:
+                     solver: Callable | None = None, check_interrupt=None) -> None:
     """Send the study's chunks to `executor` (:func:`run_chunks`) and write each one as soon
     as it is back; `t0` is when the workers were launched (default: now); `solver` as in
-    :func:`run_study`."""
+    :func:`run_study`; `check_interrupt()` is called after each chunk is written (it raises
+    KeyboardInterrupt to stop)."""
     from tqdm.auto import tqdm
 
     from skidmc.ensemble.sampling import StudySampler
@@ -497,6 +534,8 @@ def _evaluate_chunks(study: Study, file: EnsembleFile, executor, schedule: Sched
                 "solver_s": solver, "sent_s": sent, "began_s": out.began - t_wall,
                 "ended_s": out.ended - t_wall, "written_s": time.perf_counter() - t0})
         bar.update(m)
+        if check_interrupt is not None:
+            check_interrupt()
 
     bar = tqdm(total=study.n_rows * n_scenes, initial=(study.n_rows - schedule.remaining)
                * n_scenes, unit="sample", desc=study.name, file=sys.stderr, dynamic_ncols=True,
