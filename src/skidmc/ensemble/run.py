@@ -467,7 +467,7 @@ class _DeferredInterrupt:
         self.requested = False
         self._old = None
 
-    def __enter__(self) -> _DeferredInterrupt:
+    def __enter__(self) -> _DeferredInterrupt:  # noqa: PYI034 - not subclassed
         if threading.current_thread() is threading.main_thread() \
                 and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             self._old = signal.signal(signal.SIGINT, self._handle)
