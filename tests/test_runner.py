@@ -1,12 +1,12 @@
 """The ensemble runner: statuses, determinism across workers/chunks/dask, kill -9 and resume.
 
 Tests marked "real solver" run skidmc.solver on a tiny study (2 scenes x 12 samples, rtol 1e-2);
-the others replace the solver by an analytic stand-in to check the runner's bookkeeping quickly.
+the others inject an analytic stand-in (tests/conftest.py: ``solver=fake_height``) to check the
+runner's bookkeeping quickly.
 """
 
 from __future__ import annotations
 
-import argparse
 import concurrent.futures as cf
 import math
 import os
@@ -14,15 +14,15 @@ import signal
 import subprocess
 import sys
 import time
-import types
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import TINY, crashing_height, fake_height, nan_height, subprocess_env
 
-from skidmc.cli import _cmd_run as main_run
+from skidmc.cli import main
 from skidmc.ensemble import evaluate as evaluate_module
 from skidmc.ensemble import executors, schedule
 from skidmc.ensemble.batch import evaluate_batch
@@ -30,52 +30,6 @@ from skidmc.ensemble.run import execute_study, run_study
 from skidmc.ensemble.storage import StorageError, inspect_file
 from skidmc.ensemble.study import SolverOptions
 from skidmc.scene import get_preset
-
-ROOT = Path(__file__).resolve().parents[1]
-
-TINY = """
-[study]
-name = "tiny"
-[[scenes]]
-name = "quartz"
-preset = "paper-quartz"
-[[scenes]]
-name = "alumina"
-preset = "paper-alumina-smooth"
-[uncertain.mu]
-distribution = "lognorm"
-s = 0.1
-relative = true
-source = "test"
-[uncertain."target.conductivity"]
-distribution = "truncnorm"
-a = -3
-b = 3
-loc = 1.0
-scale = 0.1
-relative = true
-source = "test"
-[uncertain."kinetics.activation_temperature"]
-distribution = "uniform"
-loc = "24000 K"
-scale = "4000 K"
-source = "test"
-[uncertain."kinetics.prefactor"]
-distribution = "lognorm"
-s = 0.5
-relative = true
-source = "test"
-[[correlation]]
-keys = ["kinetics.activation_temperature", "kinetics.prefactor"]
-spearman = 0.8
-source = "test"
-[design]
-method = "mc"
-n = 12
-seed = 2024
-[solver]
-rtol = 1e-2
-"""
 
 
 def _solver_available() -> bool:
@@ -106,41 +60,13 @@ def _assert_same_data(a, b):
             assert np.array_equal(x, y), name
 
 
-@pytest.fixture
-def study_file(tmp_path):
-    path = tmp_path / "tiny.toml"
-    path.write_text(TINY)
-    return path
-
-
-# --- a stand-in for the solver -------------------------------------------------------------------
-
-
-def _fake_height(scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
-    """H = 0.37 m (0.132 / mu)^2 (k2 / 1.69)^0.5: the trends of the model, none of its cost."""
-    if scene.mu > 0.15:
-        raise FloatingPointError(f"stand-in failure at mu = {scene.mu:.4f}")
-    h = 0.37 * (0.132 / scene.mu) ** 2 * math.sqrt(scene.target_conductivity / 1.69)
-    censored = "above" if h > h_max else "below" if h < h_min else None
-    h = min(max(h, h_min), h_max)
-    return types.SimpleNamespace(critical_height=h, censored=censored, evaluations=3,
-                                 flags=("stand_in",), wall_time=1e-6)
-
-
-@pytest.fixture
-def fake_solver(monkeypatch):
-    import skidmc.solver
-
-    monkeypatch.setattr(skidmc.solver, "critical_height", _fake_height)
-
-
 # --- evaluate_batch ------------------------------------------------------------------------------
 
 
-def test_evaluate_batch_statuses_and_failures(fake_solver):
+def test_evaluate_batch_statuses_and_failures():
     base = get_preset("paper-quartz")
     rows = [{"mu": 0.132}, {"mu": 0.2}, {"mu": -1.0}, {"mu": 0.01}, {"mu": 0.14}]
-    res = evaluate_batch(rows, SolverOptions(h_max=50.0), base=base)
+    res = evaluate_batch(rows, SolverOptions(h_max=50.0), base=base, solver=fake_height)
     assert list(res.status) == ["ok", "failed", "failed", "censored_above", "ok"]
     assert res.critical_height[0] == pytest.approx(0.37, rel=1e-2)
     assert np.isnan(res.critical_height[[1, 2]]).all()  # failed: NaN, never imputed
@@ -152,16 +78,17 @@ def test_evaluate_batch_statuses_and_failures(fake_solver):
     assert len(res) == 5
 
 
-def test_evaluate_batch_accepts_scenes_and_columns(fake_solver):
+def test_evaluate_batch_accepts_scenes_and_columns():
     base = get_preset("paper-quartz")
-    by_scene = evaluate_batch([base, base.replace(mu=0.1)])
-    by_columns = evaluate_batch({"mu": np.array([0.132, 0.1])}, base="paper-quartz")
+    by_scene = evaluate_batch([base, base.replace(mu=0.1)], solver=fake_height)
+    by_columns = evaluate_batch({"mu": np.array([0.132, 0.1])}, base="paper-quartz",
+                                solver=fake_height)
     assert np.array_equal(by_scene.critical_height, by_columns.critical_height)
     assert list(by_scene.inputs["flow_stress"]) == [base.flow_stress] * 2
 
 
 @pytest.mark.parametrize("preset", ["paper-quartz", "paper-gold"])  # pendulum, vertical drop
-def test_study_columns_fast_path_equals_row_by_row(fake_solver, preset):
+def test_study_columns_fast_path_equals_row_by_row(preset):
     # A study chunk's columns (SI floats on a base scene) go through SceneColumns; the result must
     # be the general path's, bit for bit: statuses, reasons, heights and recorded inputs (for a
     # sample whose scene could not be built, its given values; a vertical drop's derived tilt).
@@ -172,8 +99,9 @@ def test_study_columns_fast_path_equals_row_by_row(fake_solver, preset):
         "initial_temperature": np.array([294.0, 600.0, 290.0, 300.0, 295.0, 296.0, 297.0, 298.0]),
         "target.conductivity": np.array([1.5, 1.6, 1.7, np.inf, 1.2, 1.3, -0.0, 1.4]),
     }
-    fast = evaluate_module._evaluate_columns(columns, {}, base)
-    general = evaluate_module._evaluate_rows(evaluate_module.as_rows(columns), {}, base)
+    fast = evaluate_module._evaluate_columns(columns, {}, base, fake_height)
+    general = evaluate_module._evaluate_rows(evaluate_module.as_rows(columns), {}, base,
+                                             fake_height)
     _assert_same_batch(fast, general)
     for k in fast.inputs:  # np.array_equal takes -0.0 for 0.0: bytes do not
         assert fast.inputs[k].tobytes() == general.inputs[k].tobytes(), k
@@ -181,34 +109,48 @@ def test_study_columns_fast_path_equals_row_by_row(fake_solver, preset):
     assert fast.failure_reason[2] == "invalid inputs: SceneError: mu = -1.0: must be in [0, 5) " \
         "(a friction coefficient of 5 or more is surely a typo)"
     # evaluate_batch in process takes the same path; a chunk of a study too.
-    batch = evaluate_batch(columns, base=base)
+    batch = evaluate_batch(columns, base=base, solver=fake_height)
     _assert_same_batch(batch, general)
-    chunk = executors.Chunk(0, 8, (base, base), [columns, evaluate_module.as_rows(columns)], {})
+    chunk = executors.Chunk(0, 8, (base, base), [columns, evaluate_module.as_rows(columns)], {},
+                            solver=fake_height)
     for res in executors.evaluate_chunk(chunk).results:
         _assert_same_batch(res, general)
 
 
-def test_columns_outside_the_fast_path_go_row_by_row(fake_solver):
+def test_columns_outside_the_fast_path_go_row_by_row():
     quartz = get_preset("paper-quartz")
-    ints = evaluate_batch({"he.density": np.array([1900, 0])}, base=quartz)  # make_scene's
+    ints = evaluate_batch({"he.density": np.array([1900, 0])}, base=quartz,  # make_scene's
+                          solver=fake_height)
     assert list(ints.status) == ["ok", "failed"] and ints.inputs["he.density"][0] == 1900.0
     assert ints.failure_reason[1] == "invalid inputs: SceneError: he.density = 0: must be > 0 " \
         "kg/m^3"  # the integer as given
-    names = evaluate_batch({"he_density": np.array([1800.0, -1.0])}, base=quartz)
+    names = evaluate_batch({"he_density": np.array([1800.0, -1.0])}, base=quartz,
+                           solver=fake_height)
     assert list(names.status) == ["ok", "failed"] and names.inputs["he.density"][0] == 1800.0
-    unknown = evaluate_batch({"muu": np.array([0.1])}, base=quartz)
+    unknown = evaluate_batch({"muu": np.array([0.1])}, base=quartz, solver=fake_height)
     assert unknown.failure_reason[0].startswith("invalid inputs: UnknownKeyError: muu = 0.1")
     with pytest.raises(ValueError, match="different lengths"):
-        evaluate_batch({"mu": np.array([0.1]), "angle": np.array([1.0, 2.0])}, base=quartz)
+        evaluate_batch({"mu": np.array([0.1]), "angle": np.array([1.0, 2.0])}, base=quartz,
+                       solver=fake_height)
 
 
-def test_non_finite_height_is_a_failure(monkeypatch):
+def test_non_finite_height_is_a_failure():
+    res = evaluate_batch([get_preset("paper-quartz")], solver=nan_height)
+    assert res.status[0] == "failed" and "non-finite" in res.failure_reason[0]
+
+
+def test_the_solver_is_injected_not_imported(monkeypatch):
+    # With a solver given, skidmc.solver is never consulted: a broken one cannot be reached.
     import skidmc.solver
 
-    monkeypatch.setattr(skidmc.solver, "critical_height", lambda scene, **kw: types.SimpleNamespace(
-        critical_height=float("nan"), censored=None, evaluations=1, flags=(), wall_time=0.0))
-    res = evaluate_batch([get_preset("paper-quartz")])
-    assert res.status[0] == "failed" and "non-finite" in res.failure_reason[0]
+    def broken(*args, **kwargs):
+        raise AssertionError("the default solver was called")
+
+    monkeypatch.setattr(skidmc.solver, "critical_height", broken)
+    res = evaluate_batch([get_preset("paper-quartz")], solver=fake_height)
+    assert list(res.status) == ["ok"]
+    with pytest.raises(TypeError, match="callable"):
+        evaluate_batch([get_preset("paper-quartz")], solver="critical_height")
 
 
 @real_solver
@@ -226,8 +168,8 @@ def test_evaluate_batch_real_solver_and_censoring():
 # --- run_study bookkeeping (stand-in solver, in-process) -----------------------------------------
 
 
-def test_failing_samples_never_stop_the_run(tmp_path, study_file, fake_solver):
-    path = run_study(study_file, tmp_path / "out", workers=1, progress=False)
+def test_failing_samples_never_stop_the_run(tmp_path, study_file, ):
+    path = run_study(study_file, tmp_path / "out", workers=1, progress=False, solver=fake_height)
     assert path == tmp_path / "out" / "ensemble.h5"
     ds = xr.open_dataset(path)
     status = ds.status.values
@@ -240,24 +182,27 @@ def test_failing_samples_never_stop_the_run(tmp_path, study_file, fake_solver):
     assert (ds.mu.values[failed] > 0.15).all() and (ds.mu.values[~failed] <= 0.15).all()
 
 
-def test_single_scene_study(tmp_path, fake_solver):
+def test_single_scene_study(tmp_path, ):
     path = tmp_path / "one.toml"
     path.write_text(TINY.split("[[scenes]]")[0] + '[scene]\npreset = "paper-quartz"\n'
                     + TINY[TINY.index("[uncertain.mu]"):])
-    ds = xr.open_dataset(run_study(path, tmp_path / "one.h5", workers=1, progress=False))
+    ds = xr.open_dataset(run_study(path, tmp_path / "one.h5", workers=1, progress=False,
+                                   solver=fake_height))
     assert ds.critical_height.dims == ("sample",) and ds.sizes["sample"] == 12
     assert "" not in ds.status.values and ds.attrs["complete"] == 1
 
 
-def test_n_override_and_mc_prefix(tmp_path, study_file, fake_solver):
-    full = run_study(study_file, tmp_path / "full.h5", workers=1, progress=False)
-    short = run_study(study_file, tmp_path / "short.h5", n=5, workers=1, progress=False)
+def test_n_override_and_mc_prefix(tmp_path, study_file, ):
+    full = run_study(study_file, tmp_path / "full.h5", workers=1, progress=False,
+                     solver=fake_height)
+    short = run_study(study_file, tmp_path / "short.h5", n=5, workers=1, progress=False,
+                      solver=fake_height)
     a, b = _data(full), _data(short)
     assert b.sizes["sample"] == 5
     assert np.array_equal(a.mu.values[:, :5], b.mu.values)
 
 
-def test_a_sample_that_kills_its_worker_is_isolated(tmp_path, study_file, fake_solver,
+def test_a_sample_that_kills_its_worker_is_isolated(tmp_path, study_file,
                                                     monkeypatch):
     real = executors.evaluate_chunk
 
@@ -267,7 +212,8 @@ def test_a_sample_that_kills_its_worker_is_isolated(tmp_path, study_file, fake_s
         return real(chunk)
 
     monkeypatch.setattr(schedule, "evaluate_chunk", crashing)
-    path = run_study(study_file, tmp_path / "o.h5", workers=1, chunk_size=4, progress=False)
+    path = run_study(study_file, tmp_path / "o.h5", workers=1, chunk_size=4, progress=False,
+                     solver=fake_height)
     ds = xr.open_dataset(path)
     assert list(ds.status.values[:, 3]) == ["failed", "failed"]
     assert "worker process died" in ds.failure_reason.values[0, 3]
@@ -275,46 +221,96 @@ def test_a_sample_that_kills_its_worker_is_isolated(tmp_path, study_file, fake_s
     assert "" not in others and ds.attrs["complete"] == 1
 
 
-def test_existing_files_are_never_overwritten(tmp_path, study_file, fake_solver):
+def test_existing_files_are_never_overwritten(tmp_path, study_file):
     out = tmp_path / "o.h5"
-    run_study(study_file, out, workers=1, progress=False)
+    run_study(study_file, out, workers=1, progress=False, solver=fake_height)
     before = out.read_bytes()
-    with pytest.raises(StorageError, match="complete run"):
-        run_study(study_file, out, workers=1, progress=False)
-    report = execute_study(study_file, out, workers=1, resume=True, progress=False)
+    # A complete file of this very study is up to date: nothing computed, nothing written.
+    report = execute_study(study_file, out, workers=1, progress=False, solver=fake_height)
+    assert report.action == "up_to_date" and report.evaluated == 0 and report.completed
+    report = execute_study(study_file, out, workers=1, resume=True, progress=False,
+                           solver=fake_height)
     assert report.evaluated == 0  # already complete: nothing to do
     assert out.read_bytes() == before
     foreign = tmp_path / "foreign.h5"
     foreign.write_text("mine")
-    with pytest.raises(StorageError, match="not an HDF5"):
-        run_study(study_file, foreign, workers=1, progress=False)
-    with pytest.raises(StorageError, match="not an HDF5"):
-        run_study(study_file, foreign, workers=1, progress=False, resume=True)
+    for kwargs in ({}, {"resume": True}, {"force": True}):
+        with pytest.raises(StorageError, match="not an HDF5"):
+            run_study(study_file, foreign, workers=1, progress=False, solver=fake_height,
+                      **kwargs)
     assert foreign.read_text() == "mine"
 
 
-def _args(study, out, **kw):
-    return argparse.Namespace(study=str(study), out=str(out), n=kw.get("n"), workers=1,
-                              scheduler=None, resume=kw.get("resume", False),
-                              quiet=kw.get("quiet", True))
+def test_a_file_of_another_study_or_n_is_refused(tmp_path, study_file):
+    out = tmp_path / "o.h5"
+    run_study(study_file, out, workers=1, progress=False, solver=fake_height)
+    before = out.read_bytes()
+    other = tmp_path / "other.toml"
+    other.write_text(TINY.replace('name = "tiny"', 'name = "other"'))
+    for kwargs in ({}, {"force": True}, {"resume": True}):  # another study: even with force
+        with pytest.raises(StorageError, match="another study .*'tiny'.*even with --force"):
+            run_study(other, out, workers=1, progress=False, solver=fake_height, **kwargs)
+    edited = tmp_path / "edited.toml"  # the same study, edited: its text hash differs
+    edited.write_text(TINY.replace("seed = 2024", "seed = 2025"))
+    with pytest.raises(StorageError, match="another version of this study.*--force"):
+        run_study(edited, out, workers=1, progress=False, solver=fake_height)
+    with pytest.raises(StorageError, match="a different --n"):
+        run_study(study_file, out, n=5, workers=1, progress=False, solver=fake_height)
+    assert out.read_bytes() == before
+    # --force recomputes this study's file into the new version.
+    run_study(edited, out, workers=1, progress=False, solver=fake_height, force=True)
+    with xr.open_dataset(out) as ds:
+        assert ds.attrs["seed"] == 2025 and ds.attrs["complete"] == 1
+    assert not (tmp_path / "o.h5.new").exists()
 
 
-def test_main_run_exit_codes(tmp_path, study_file, fake_solver, capsys):
-    bad = tmp_path / "bad.toml"
-    bad.write_text(TINY.replace("seed = 2024", "seed = -1"))
-    assert main_run(_args(bad, tmp_path / "x")) == 2
-    assert "design.seed" in capsys.readouterr().err
-    assert main_run(_args(study_file, tmp_path / "x", quiet=False)) == 0
-    captured = capsys.readouterr()
-    assert captured.out.strip() == str(tmp_path / "x" / "ensemble.h5")
-    assert "evaluations" in captured.err and "failed" in captured.err
-    assert main_run(_args(study_file, tmp_path / "x")) == 2
-    assert "refusing to overwrite" in capsys.readouterr().err
+def test_force_replaces_the_file_only_when_complete(tmp_path, study_file):
+    from conftest import interrupting_height
+
+    from skidmc.ensemble.run import RunInterrupted
+
+    out = tmp_path / "o.h5"
+    run_study(study_file, out, workers=1, progress=False, solver=fake_height)
+    before = out.read_bytes()
+    with pytest.raises(RunInterrupted) as info:  # Ctrl-C half-way through a --force run
+        run_study(study_file, out, workers=1, chunk_size=2, progress=False, force=True,
+                  solver=interrupting_height)
+    new = tmp_path / "o.h5.new"
+    assert out.read_bytes() == before  # the old file is untouched
+    partial = inspect_file(new)
+    assert 0 < partial["done"] < 12 and not partial["complete"]
+    assert f"{out} is unchanged" in info.value.hint and str(new) in info.value.hint
+    # The next --force continues the new file, then renames it over the old one.
+    report = execute_study(study_file, out, workers=1, chunk_size=2, progress=False, force=True,
+                           solver=fake_height)
+    assert report.action == "replace" and report.evaluated == 2 * (12 - partial["done"])
+    assert not new.exists() and inspect_file(out)["complete"]
+    _assert_same_data(out, run_study(study_file, tmp_path / "fresh.h5", workers=1,
+                                     progress=False, solver=fake_height))
+    history = xr.open_dataset(out).attrs["history"]
+    assert f"started with {partial['done']} of 12" in history
 
 
-def test_no_progress_bar_when_stderr_is_not_a_terminal(tmp_path, study_file, fake_solver,
-                                                       capfd):
-    run_study(study_file, tmp_path / "o.h5", workers=1)  # progress=None: automatic
+def test_an_interrupted_new_run_keeps_its_chunks_or_leaves_nothing(tmp_path, study_file):
+    from conftest import interrupting_height
+
+    from skidmc.ensemble.run import RunInterrupted
+
+    out = tmp_path / "o.h5"
+    with pytest.raises(RunInterrupted) as info:
+        run_study(study_file, out, workers=1, chunk_size=2, progress=False,
+                  solver=interrupting_height)
+    done = inspect_file(out)["done"]
+    assert info.value.hint == f"{done} of 12 samples are saved in {out}; continue with --resume"
+    first = tmp_path / "first.h5"  # interrupted before any chunk was written: no file
+    with pytest.raises(RunInterrupted, match="nothing was written"):
+        run_study(study_file, first, workers=1, chunk_size=12, progress=False,
+                  solver=interrupting_height)
+    assert not first.exists() and not Path(f"{first}.tmp").exists()
+
+
+def test_no_progress_bar_when_stderr_is_not_a_terminal(tmp_path, study_file, capfd):
+    run_study(study_file, tmp_path / "o.h5", workers=1, solver=fake_height)  # progress: auto
     err = capfd.readouterr().err
     assert "sample/s" not in err and "%|" not in err
 
@@ -376,9 +372,7 @@ def _done_count(path: Path) -> int:
 @real_solver
 def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path, study_file, reference):
     out = tmp_path / "killed.h5"
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT / "src"),
-                                                      env.get("PYTHONPATH")]))
+    env = subprocess_env()
     cmd = [sys.executable, "-m", "skidmc", "run", str(study_file), "--out", str(out),
            "--workers", "1", "--chunk-size", "1", "--quiet"]
     proc = subprocess.Popen(cmd, env=env, start_new_session=True, stdout=subprocess.PIPE,
@@ -397,7 +391,7 @@ def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path, study_file, re
     assert 1 <= info["done"] < info["n_rows"], "killed too late to interrupt anything"
 
     # Without --resume the unfinished file is refused, and left as it is.
-    assert main_run(_args(study_file, out)) == 2
+    assert main(["run", str(study_file), "--out", str(out), "--workers", "1", "--quiet"]) == 2
     assert inspect_file(out)["done"] == info["done"]
 
     run_study(study_file, out, workers=1, resume=True, chunk_size=5, progress=False)
@@ -407,33 +401,47 @@ def test_kill_9_then_resume_equals_an_uninterrupted_run(tmp_path, study_file, re
     assert any(f"started with {info['done']} of 12" in line for line in history)
 
 
-_CRASHING_SOLVER = '''
-# Loaded at start-up of every Python process of the test (worker processes included): replaces
-# the solver by the stand-in of tests/test_runner.py, which kills its process for mu > 0.14.
-import math, os, types
-import skidmc.solver
+@real_solver
+def test_ctrl_c_during_a_multi_worker_run_is_one_line_and_exit_130(tmp_path, study_file):
+    # Ctrl-C at a terminal sends SIGINT to the whole process group: the run, the forkserver
+    # and every worker. Only the parent acts on it.
+    out = tmp_path / "interrupted.h5"
+    cmd = [sys.executable, "-m", "skidmc", "run", str(study_file), "--out", str(out),
+           "--workers", "2", "--chunk-size", "1", "--n", "400"]
+    proc = subprocess.Popen(cmd, env=subprocess_env(), start_new_session=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    try:
+        while _done_count(out) < 2:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no chunk written in 300 s"
+            time.sleep(0.01)
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    info = inspect_file(out)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
+    line = (f"skidmc run: interrupted; {info['done']} of 400 samples are saved in {out}; "
+            "continue with --resume")
+    assert stderr.splitlines() == [line]
+    assert stdout == "" and 2 <= info["done"] < 400 and not info["complete"]
 
-def critical_height(scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
-    if scene.mu > 0.14:
-        os._exit(3)  # a crash in compiled code: no exception, the process is gone
-    h = 0.37 * (0.132 / scene.mu) ** 2 * math.sqrt(scene.target_conductivity / 1.69)
-    return types.SimpleNamespace(critical_height=h, censored=None, evaluations=3, flags=(),
-                                 wall_time=1e-6)
 
-skidmc.solver.critical_height = critical_height
-'''
+# A solver that kills its worker process is injected like any other (conftest.crashing_height,
+# module level: it pickles by reference into the workers); the test process only hands out chunks.
 
 
 def test_a_crashing_worker_process_costs_only_its_sample(tmp_path, study_file):
-    (tmp_path / "sitecustomize.py").write_text(_CRASHING_SOLVER)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), str(ROOT / "src"),
-                                                      env.get("PYTHONPATH")]))
     out = tmp_path / "crash.h5"
-    proc = subprocess.run([sys.executable, "-m", "skidmc", "run", str(study_file), "--out",
-                           str(out), "--workers", "2", "--chunk-size", "4", "--quiet"],
-                          env=env, capture_output=True, text=True, timeout=300, check=False)
-    assert proc.returncode == 0, proc.stderr
+    try:
+        run_study(study_file, out, workers=2, chunk_size=4, progress=False,
+                  solver=crashing_height)
+    finally:
+        executors.shutdown_workers()
     ds = xr.open_dataset(out)
     crashed = ds.mu.values > 0.14
     assert crashed.any() and (~crashed).any()
@@ -515,26 +523,13 @@ def test_evaluate_batch_on_workers_identical_ordered_isolated():
     assert not executors.POOLS
 
 
-_BATCH_SCRIPT = """
-import json, sys
-from skidmc.ensemble.batch import evaluate_batch
-if __name__ == "__main__":
+def test_evaluate_batch_survives_a_crashing_worker():
     rows = [{"mu": m} for m in (0.10, 0.12, 0.145, 0.13, 0.16, 0.11)]
-    res = evaluate_batch(rows, {"rtol": 1e-2}, base="paper-quartz", workers=2, chunk_size=2)
-    print(json.dumps({"status": list(res.status), "reason": list(res.failure_reason),
-                      "mu": list(res.inputs["mu"])}))
-"""
-
-
-def test_evaluate_batch_survives_a_crashing_worker(tmp_path):
-    (tmp_path / "sitecustomize.py").write_text(_CRASHING_SOLVER)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), str(ROOT / "src"),
-                                                      env.get("PYTHONPATH")]))
-    proc = subprocess.run([sys.executable, "-c", _BATCH_SCRIPT], env=env, capture_output=True,
-                          text=True, timeout=300, check=False)
-    assert proc.returncode == 0, proc.stderr
-    out = __import__("json").loads(proc.stdout.strip().splitlines()[-1])
-    assert out["mu"] == [0.10, 0.12, 0.145, 0.13, 0.16, 0.11]  # order kept
-    assert out["status"] == ["ok", "ok", "failed", "ok", "failed", "ok"]
-    assert all("worker process died" in out["reason"][i] for i in (2, 4))
+    try:
+        res = evaluate_batch(rows, {"rtol": 1e-2}, base="paper-quartz", workers=2, chunk_size=2,
+                             solver=crashing_height)
+    finally:
+        executors.shutdown_workers()
+    assert list(res.inputs["mu"]) == [0.10, 0.12, 0.145, 0.13, 0.16, 0.11]  # order kept
+    assert list(res.status) == ["ok", "ok", "failed", "ok", "failed", "ok"]
+    assert all("worker process died" in res.failure_reason[i] for i in (2, 4))

@@ -11,50 +11,26 @@ import h5py
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import STORAGE_TEXT as TEXT
 
 from skidmc.ensemble.storage import (
+    CHUNK_BYTES,
     FORMAT,
+    PAGE_BYTES,
     EnsembleFile,
     StorageError,
     _encode,
     ensemble_variables,
     inspect_file,
+    summarize_file,
+    verify_file,
 )
 from skidmc.ensemble.study import parse_study
 
-TEXT = """
-[study]
-name = "storage-test"
-description = "two scenes"
-[[scenes]]
-name = "quartz"
-preset = "paper-quartz"
-[[scenes]]
-name = "gold"
-preset = "paper-gold"
-[uncertain.mu]
-distribution = "lognorm"
-s = 0.2
-relative = true
-source = "test"
-[uncertain."kinetics.rate_at_reference"]
-distribution = "lognorm"
-s = 1.0
-relative = true
-reference_temperature = "575 K"
-source = "test"
-[design]
-method = "mc"
-n = 10
-seed = 42
-[solver]
-rtol = 1e-2
-"""
-
 
 @pytest.fixture
-def study():
-    return parse_study(TEXT, file="storage-test.toml")
+def study(storage_study):
+    return storage_study
 
 
 def _columns(study, start, stop, status="ok"):
@@ -189,3 +165,152 @@ def test_text_is_cut_at_a_character_boundary():
     assert chars.shape == (2, 5)
     decoded = [b"".join(row).decode("utf-8") for row in chars]
     assert decoded == ["éé", "ok"]
+
+
+# --- checksums and crash safety -------------------------------------------------------------------
+
+
+def _chunk_extents(path) -> list[tuple[int, int, str]]:
+    """(first byte, end byte, variable) of every HDF5 chunk of every chunked variable."""
+    out = []
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset) and obj.chunks:
+                for i in range(obj.id.get_num_chunks()):
+                    info = obj.id.get_chunk_info(i)
+                    out.append((info.byte_offset, info.byte_offset + info.size, name))
+        f.visititems(visit)
+    return out
+
+
+def test_every_per_sample_variable_is_checksummed_in_page_sized_aligned_chunks(tmp_path, study):
+    path = tmp_path / "ens.h5"
+    EnsembleFile.create(path, study.with_n(1000)).close()
+    with h5py.File(path, "r") as f:
+        for spec in ensemble_variables(study):
+            ds = f[spec.name]
+            assert ds.fletcher32 and ds.chunks, spec.name
+            assert ds.id.get_create_plist().get_alloc_time() == h5py.h5d.ALLOC_TIME_EARLY
+            assert ds.id.get_num_chunks() == np.prod(
+                [-(-n // c) for n, c in zip(ds.shape, ds.chunks)])  # all allocated at creation
+        assert f["done"].fletcher32 and f["sample"].fletcher32
+    extents = _chunk_extents(path)
+    for first, end, name in extents:
+        assert end - first <= PAGE_BYTES and first % PAGE_BYTES == 0, name  # one page each
+    # The largest chunks fill their page but for the remainder of CHUNK_BYTES / element size.
+    assert max(end - first for first, end, _ in extents) > CHUNK_BYTES - 256
+
+
+def test_writing_a_chunk_changes_only_chunk_data(tmp_path, study):
+    # The crash-safety rule of the module docstring: after creation, writes touch raw data only
+    # (chunks rewritten in place, the chunk index never changes).
+    path = tmp_path / "ens.h5"
+    EnsembleFile.create(path, study).close()
+    before = np.frombuffer(path.read_bytes(), np.uint8)
+    with EnsembleFile.resume(path, study) as f:
+        f.write_chunk(3, 6, _columns(study, 3, 6))
+        f.write_chunk(6, 7, _columns(study, 6, 7, status="failed"))
+    after = np.frombuffer(path.read_bytes(), np.uint8)
+    assert before.size == after.size
+    changed = np.flatnonzero(before != after)
+    assert changed.size > 0
+    extents = _chunk_extents(path)
+    outside = [int(i) for i in changed if not any(a <= i < b for a, b, _ in extents)]
+    assert outside == []
+
+
+def _flip_byte_in(path, variable: str, chunk: int = 0, at: int = 5) -> None:
+    with h5py.File(path, "r") as f:
+        offset = f[variable].id.get_chunk_info(chunk).byte_offset
+    with open(path, "r+b") as fh:
+        fh.seek(offset + at)
+        byte = fh.read(1)
+        fh.seek(offset + at)
+        fh.write(bytes([byte[0] ^ 0x10]))
+
+
+def test_bytes_overwritten_in_the_data_are_detected(tmp_path, study):
+    path = tmp_path / "ens.h5"
+    with EnsembleFile.create(path, study) as f:
+        f.write_chunk(0, 10, _columns(study, 0, 10))
+        f.mark_complete()
+    verify_file(path)  # intact
+    _flip_byte_in(path, "critical_height", chunk=1)
+    assert inspect_file(path)["complete"]  # attributes and done flags alone look fine ...
+    with pytest.raises(StorageError, match="damaged: variable 'critical_height'.*samples 0-9"
+                       ".*--force") as info:
+        inspect_file(path, verify=True)  # ... the checksums do not
+    assert info.value.damaged
+    with pytest.raises(StorageError, match="damaged"):
+        EnsembleFile.resume(path, study)
+
+
+def test_a_truncated_file_is_damaged_not_busy(tmp_path, study):
+    path = tmp_path / "ens.h5"
+    with EnsembleFile.create(path, study) as f:
+        f.write_chunk(0, 10, _columns(study, 0, 10))
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(StorageError, match="is damaged: the file is truncated") as info:
+        inspect_file(path)
+    assert info.value.damaged and "another process" not in str(info.value)
+    assert "--force" in str(info.value)
+    path.write_bytes(b"")
+    with pytest.raises(StorageError, match="empty file") as info:
+        inspect_file(path)
+    assert info.value.damaged
+
+
+def test_create_says_why_it_cannot(tmp_path, study):
+    blocker = tmp_path / "notes.txt"
+    blocker.write_text("a file")
+    with pytest.raises(StorageError, match=f"cannot create the result file: {blocker} is a "
+                       "file, not a folder"):
+        EnsembleFile.create(blocker / "sub" / "ens.h5", study)
+    assert blocker.read_text() == "a file"
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
+                    reason="root may write anywhere")
+def test_create_in_a_folder_without_permission(tmp_path, study):
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o500)
+    try:
+        with pytest.raises(StorageError, match=f"permission denied for {locked}"):
+            EnsembleFile.create(locked / "ens.h5", study)
+        assert list(locked.iterdir()) == []
+    finally:
+        locked.chmod(0o700)
+
+
+def test_summary_per_scene(tmp_path, study):
+    path = tmp_path / "ens.h5"
+    cols = _columns(study, 0, 10)
+    cols["critical_height"] = np.array([np.arange(1.0, 11.0), np.full(10, 1e4)])
+    cols["status"] = np.array([["ok"] * 8 + ["failed", "censored_below"],
+                               ["censored_above"] * 10], dtype=object)
+    cols["critical_height"][0, 8:] = np.nan, 1e-3  # failed; censored below at h_min
+    with EnsembleFile.create(path, study) as f:
+        f.write_chunk(0, 10, cols)
+    quartz, gold = summarize_file(path)
+    assert (quartz.scene, quartz.written, quartz.ok, quartz.failed) == ("quartz", 10, 8, 1)
+    assert (quartz.censored_below, quartz.censored_above) == (1, 0)
+    # Empirical quantiles over the 9 that did not fail (1e-3, 1, ..., 8): sample values.
+    assert (quartz.p05, quartz.median, quartz.p95) == (1e-3, 4.0, 8.0)
+    assert quartz.range_bound == ("<", "") and quartz.median_bound == ""
+    assert gold.censored_above == 10 and gold.median == 1e4 and gold.median_bound == ">"
+
+
+def test_create_reports_permission_denied_by_the_system(tmp_path, study, monkeypatch):
+    # As root the chmod test above cannot fail; the system's answer is simulated here.
+    import errno
+    import pathlib
+
+    def denied(self, *args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied", str(self))
+
+    monkeypatch.setattr(pathlib.Path, "mkdir", denied)
+    target = tmp_path / "no" / "ens.h5"
+    with pytest.raises(StorageError, match=f"{target}: cannot create the result file: "
+                       f"permission denied for {target.parent}"):
+        EnsembleFile.create(target, study)

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
 from collections.abc import Sequence
 
@@ -38,6 +40,23 @@ def _positive_float(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be > 0, got {text!r}")
     return value
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    return value
+
+
+def _cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
 
 
 def _parse_sets(items: Sequence[str]) -> dict[str, str]:
@@ -200,24 +219,44 @@ def _cmd_height(args: argparse.Namespace) -> int:
         print(json.dumps(report, indent=2, default=_json_default))
         return 0
 
-    bound = {"above": "> ", "below": "< "}.get(result.censored, "")
+    print(_height_text(report, result.censored, args, overrides))
+    return 0
+
+
+def _height_text(report: dict, censored: str | None, args: argparse.Namespace,
+                 overrides: dict) -> str:
+    """The text of ``skidmc height`` (without --json): height, error estimate, one line per
+    validity flag with its meaning (:data:`skidmc.solver.FLAG_MEANINGS`)."""
+    from skidmc.solver import FLAG_MEANINGS
+
+    bound = {"above": "> ", "below": "< "}.get(censored, "")
     meaning = {
         "above": "censored: no event up to the upper search bound",
         "below": "censored: event already at the lower search bound",
-    }.get(result.censored, "no")
-    height_ft = report["critical_height_ft"]
+    }.get(censored, "no")
+    height_m, height_ft = report["critical_height_m"], report["critical_height_ft"]
+    error = report.get("error_estimate", math.nan)
+    error = float(error) if isinstance(error, (int, float)) else math.nan
     rows = [
-        ("critical height", f"{bound}{height_m:.4g} m", f"({bound}{height_ft:.4g} ft)"),
-        ("censored", meaning, ""),
-        ("evaluations", str(report["evaluations"]), ""),
-        ("flags", ", ".join(report["flags"]) or "-", ""),
-        ("wall time", f"{report['wall_time_s']:.3g} s", ""),
-        ("rtol, tier", f"{args.rtol:g}, {args.tier}", ""),
-        ("preset", args.preset, ""),
+        ("critical height", f"{bound}{height_m:.4g} m ({bound}{height_ft:.4g} ft)"),
+        ("censored", meaning),
     ]
-    rows += [("set", f"{key} = {value}", "") for key, value in overrides.items()]
-    print(_table(rows))
-    return 0
+    if args.tier == "fast":  # no search, no simulation: an error against the full model
+        if math.isfinite(error):
+            typical = f"{100 * error:.2g} % (typical error of the fast tier against the full model)"
+            rows.append(("error estimate", typical))
+        rows.append(("model", "reduced model (fast tier), no simulation"))
+    else:
+        if math.isfinite(error):
+            rows.append(("error estimate", f"{100 * error:.2g} % (relative, numerical)"))
+        rows += [("evaluations", str(report["evaluations"])),
+                 ("wall time", f"{report['wall_time_s']:.3g} s")]
+    flags = report["flags"]
+    rows += [("flags" if i == 0 else "", f"{flag}: {FLAG_MEANINGS.get(flag, '(undocumented)')}")
+             for i, flag in enumerate(flags)] or [("flags", "none")]
+    rows += [("rtol, tier", f"{args.rtol:g}, {args.tier}"), ("preset", args.preset)]
+    rows += [("set", f"{key} = {value}") for key, value in overrides.items()]
+    return _table(rows)
 
 
 # --- skidmc run ---------------------------------------------------------------------------------
@@ -228,48 +267,120 @@ def _cmd_height(args: argparse.Namespace) -> int:
 def _add_run_parser(subparsers) -> None:
     run = subparsers.add_parser(
         "run", help="run a study (TOML) over an ensemble of scenes",
-        description="Run the study described in STUDY.toml and store its results.",
+        description="Run the study described in STUDY.toml and store its results. A complete "
+        "result file of the same study (same text, same n) is up to date: its summary is "
+        "printed and nothing is computed (--force recomputes it).",
     )
     run.add_argument("study", help="study file (TOML)")
     run.add_argument("--out", help="result file (.h5) or folder (default: "
                      "results/<study name>/ensemble.h5)")
-    run.add_argument("--n", type=int, help="samples per scene (default: the study's)")
-    run.add_argument("--workers", type=int, help="parallel workers (default: all CPUs)")
-    run.add_argument("--scheduler", help="'local' (processes, default), 'dask' (a local dask "
-                     "cluster of --workers) or a dask scheduler address")
-    run.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    run.add_argument("--n", type=_positive_int, help="samples per scene (default: the study's)")
+    run.add_argument("--workers", type=_positive_int,
+                     help="parallel workers, >= 1 (default: all CPUs)")
+    run.add_argument("--scheduler", metavar="{local,dask,tcp://host:port}",
+                     help="where samples are evaluated: local (worker processes on this "
+                     "machine, the default), dask (a local dask cluster of --workers processes) "
+                     "or tcp://host:port (a running dask scheduler)")
+    again = run.add_mutually_exclusive_group()
+    again.add_argument("--resume", action="store_true", help="finish an interrupted run")
+    again.add_argument("--force", action="store_true",
+                       help="recompute although the result file exists (this study's, any "
+                       "version, or a damaged one); the old file is replaced only once the new "
+                       "one is complete")
     run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    run.add_argument("--chunk-size", type=int, help=argparse.SUPPRESS)
+    run.add_argument("--chunk-size", type=_positive_int, help=argparse.SUPPRESS)
     run.set_defaults(func=_cmd_run)
 
 
+#: ``--workers`` above this many times the CPUs available draws a warning.
+WORKERS_PER_CPU_WARNING = 2
+
+
+def _num(value: float) -> str:
+    """3 significant digits without an exponent in the usual range of heights."""
+    if 1000 <= abs(value) < 1e7:
+        return f"{value:.0f}"
+    return f"{value:.3g}"
+
+
+def _heights(values, bounds) -> str:
+    """``"60.6 to 400 m (199 to 1312 ft)"`` (or one value); bounds ``">"``/``"<"``/``""``."""
+    from skidmc.scene.units import from_si
+
+    if not all(math.isfinite(v) for v in values):
+        return "-"
+    m = " to ".join(f"{b}{_num(v)}" for v, b in zip(values, bounds))
+    ft = " to ".join(f"{b}{_num(from_si(v, 'm', 'ft'))}" for v, b in zip(values, bounds))
+    return f"{m} m ({ft} ft)"
+
+
+def _scene_summary_lines(path) -> list[str]:
+    """One line per scene: median and 5-95 % range of the critical height, censored and failed
+    counts (:func:`skidmc.ensemble.storage.summarize_file`)."""
+    from skidmc.ensemble.storage import summarize_file
+
+    summaries = summarize_file(path)
+    width = max(len(s.scene) for s in summaries)
+    lines = ["critical height per scene:"]
+    for s in summaries:
+        todo = "" if s.written == s.samples else f" ({s.samples - s.written} not computed yet)"
+        lines.append(
+            f"  {s.scene:<{width}}  median {_heights([s.median], [s.median_bound])}, "
+            f"5-95 %: {_heights([s.p05, s.p95], s.range_bound)}; "
+            f"censored {s.censored_above} above, {s.censored_below} below; "
+            f"failed {s.failed} of {s.written}{todo}")
+    return lines
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
-    """``skidmc run``: exit status 0 done, 2 invalid study or result file, 130 interrupted."""
-    from skidmc.ensemble.run import execute_study
+    """``skidmc run``: exit status 0 done (or up to date), 2 invalid study, option or result
+    file, 130 interrupted."""
+    from skidmc.ensemble.run import RunInterrupted, execute_study
 
     parts = ["skidmc run", str(args.study)]
     for name in ("out", "n", "workers", "scheduler"):
         if getattr(args, name, None) is not None:
             parts.append(f"--{name} {getattr(args, name)}")
-    parts += ["--resume"] * bool(args.resume)
+    parts += ["--resume"] * bool(args.resume) + ["--force"] * bool(getattr(args, "force", False))
+    cpus = _cpus()
+    if args.workers is not None and args.workers > WORKERS_PER_CPU_WARNING * cpus:
+        print(f"skidmc run: warning: --workers {args.workers} is far above the {cpus} CPUs "
+              "available; running anyway, but the workers will share the CPUs (no faster than "
+              f"--workers {cpus}) and each holds its own memory", file=sys.stderr)
     try:
         report = execute_study(
             args.study, args.out, n=args.n, workers=args.workers, scheduler=args.scheduler,
-            resume=args.resume, progress=False if args.quiet else None,
+            resume=args.resume, force=getattr(args, "force", False),
+            progress=False if args.quiet else None,
             chunk_size=getattr(args, "chunk_size", None), command=" ".join(parts))
-    except SkidmcError as exc:  # StudyError, StorageError: a message, not a traceback
+        lines = []
+        if not args.quiet:
+            if report.action == "up_to_date":
+                lines.append(f"{report.path}: up to date (a complete run of this study, n = "
+                             f"{report.n_rows}, completed {report.completed or '?'}); nothing "
+                             "computed (--force recomputes it)")
+            else:
+                lines.append(f"{report.path}: {report.summary()}")
+            lines += _scene_summary_lines(report.path)
+            failed = report.status_counts.get("failed", 0)
+            if failed:
+                lines.append(f"skidmc run: {failed} samples failed; see failure_reason in the "
+                             "file")
+    except SkidmcError as exc:  # StudyError, StorageError, SchedulerError: a message
         print(f"skidmc run: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("skidmc run: interrupted; finished chunks are saved, continue with --resume",
-              file=sys.stderr)
+    except RunInterrupted as exc:
+        print(f"skidmc run: interrupted; {exc.hint}", file=sys.stderr)
         return 130
-    if not args.quiet:
-        print(f"{report.path}: {report.summary()}", file=sys.stderr)
-        failed = report.status_counts.get("failed", 0)
-        if failed:
-            print(f"skidmc run: {failed} samples failed; see failure_reason in the file",
-                  file=sys.stderr)
+    except KeyboardInterrupt:
+        print("skidmc run: interrupted", file=sys.stderr)
+        return 130
+    except OSError as exc:  # the file system said no somewhere storage did not expect it
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"skidmc run: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    for line in lines:
+        print(line, file=sys.stderr)
     print(report.path)
     return 0
 

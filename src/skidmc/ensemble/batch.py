@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -13,6 +13,7 @@ from skidmc.ensemble.evaluate import (
     as_rows,
     empty_result,
     evaluate_here,
+    resolve_solver,
     solver_kwargs,
 )
 from skidmc.ensemble.executors import Chunk, DaskExecutor, default_workers, shared_pool
@@ -27,10 +28,10 @@ __all__ = [
 ]
 
 
-
 def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None, *,
                    base: Scene | str | None = None, workers: int | None = 1,
-                   chunk_size: int | None = None, scheduler=None) -> BatchResult:
+                   chunk_size: int | None = None, scheduler=None,
+                   solver: Callable | None = None) -> BatchResult:
     """Critical heights of any batch of scenes, one status per sample, never raising for one.
 
     Parameters
@@ -55,6 +56,11 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
     scheduler : str or distributed.Client, optional
         ``"dask"`` or a dask Client/address instead of local processes (as in
         :func:`run_study`).
+    solver : callable, optional
+        Used instead of :func:`skidmc.solver.critical_height` (default), called as
+        ``solver(scene, **solver_options)`` and returning an object with ``critical_height``,
+        ``censored``, ``evaluations`` and ``flags`` as :class:`~skidmc.solver.HeightResult`
+        has. With worker processes it is pickled: a module-level function.
 
     Returns
     -------
@@ -69,13 +75,18 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         from skidmc.scene import get_preset
 
         base = get_preset(base)
+    if solver is not None:
+        resolve_solver(solver)  # a TypeError now rather than one per sample
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be >= 1 (or None: all CPUs), got {workers!r}")
     if scheduler in (None, "local") and (workers or default_workers()) == 1:
-        return evaluate_here(scenes, kwargs, base)
-    return _evaluate_rows_parallel(as_rows(scenes), kwargs, base, workers, chunk_size, scheduler)
+        return evaluate_here(scenes, kwargs, base, solver)
+    return _evaluate_rows_parallel(as_rows(scenes), kwargs, base, workers, chunk_size, scheduler,
+                                   solver)
 
 
 def _evaluate_rows_parallel(rows: list, kwargs: dict, base: Scene | None, workers,
-                            chunk_size, scheduler) -> BatchResult:
+                            chunk_size, scheduler, solver: Callable | None) -> BatchResult:
     """evaluate_batch through the chunk machinery of a study run (warm local pool or dask)."""
     m = len(rows)
     out = empty_result(m)
@@ -87,7 +98,7 @@ def _evaluate_rows_parallel(rows: list, kwargs: dict, base: Scene | None, worker
         executor, owned = DaskExecutor(None if scheduler == "dask" else scheduler, workers), True
 
     def make_chunk(start: int, stop: int, isolated: bool):
-        return Chunk(start, stop, (base,), [rows[start:stop]], kwargs, isolated), None
+        return Chunk(start, stop, (base,), [rows[start:stop]], kwargs, isolated, solver), None
 
     def consume(chunk: Chunk, _context, results: list[BatchResult], _out) -> None:
         (res,) = results

@@ -1,4 +1,9 @@
 """In-process evaluation of a batch of scenes: one status and height per sample.
+
+The solver is a parameter: every function that solves takes ``solver``, a callable with the
+signature of :func:`skidmc.solver.critical_height` (None: that function). A caller injects another
+one (a stand-in in tests, an instrumented solver in a benchmark); for worker processes it travels
+with the chunk, so it must pickle (a module-level function does).
 """
 
 from __future__ import annotations
@@ -6,15 +11,11 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Mapping
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
 from skidmc.scene import NUMERIC_KEYS, Scene, SceneColumns, make_scene
-
-if TYPE_CHECKING:
-    pass
 
 __all__ = [
     "BatchResult",
@@ -22,9 +23,9 @@ __all__ = [
     "empty_result",
     "evaluate_here",
     "record_given",
+    "resolve_solver",
     "solver_kwargs",
 ]
-
 
 
 @dataclasses.dataclass
@@ -103,6 +104,18 @@ def _solve_into(out: BatchResult, i: int, critical_height, scene: Scene, kwargs:
     out.wall_time[i] = time.perf_counter() - t0
 
 
+def resolve_solver(solver: Callable | None) -> Callable:
+    """`solver`, or :func:`skidmc.solver.critical_height` when it is None (imported only then)."""
+    if solver is not None:
+        if not callable(solver):
+            raise TypeError(f"solver must be a callable like skidmc.solver.critical_height, got "
+                            f"{solver!r}")
+        return solver
+    from skidmc.solver import critical_height
+
+    return critical_height
+
+
 def solver_kwargs(solver_options) -> dict:
     """SolverOptions or mapping -> plain keyword arguments (picklable without skidmc.study)."""
     if hasattr(solver_options, "as_kwargs"):  # a SolverOptions
@@ -130,18 +143,19 @@ def record_given(out: BatchResult, i: int, row, base_values: dict) -> None:
             out.inputs[k][i] = given[k]
 
 
-def evaluate_here(scenes, kwargs: dict, base: Scene | None) -> BatchResult:
+def evaluate_here(scenes, kwargs: dict, base: Scene | None,
+                  solver: Callable | None = None) -> BatchResult:
     """evaluate_batch in this process: columns through :func:`_evaluate_columns`, rows or
-    scenes through :func:`_evaluate_rows`."""
+    scenes through :func:`_evaluate_rows`; `solver` as in the module docstring."""
     if isinstance(scenes, Mapping):
-        return _evaluate_columns(scenes, kwargs, base)
-    return _evaluate_rows(as_rows(scenes), kwargs, base)
+        return _evaluate_columns(scenes, kwargs, base, solver)
+    return _evaluate_rows(as_rows(scenes), kwargs, base, solver)
 
 
-def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None) -> BatchResult:
+def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None,
+                   solver: Callable | None = None) -> BatchResult:
     """evaluate_batch in this process."""
-    from skidmc.solver import critical_height
-
+    critical_height = resolve_solver(solver)
     m = len(rows)
     out = empty_result(m)
     base_values = base.as_dict() if base is not None else {}
@@ -161,7 +175,8 @@ def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None) -> BatchResult:
     return out
 
 
-def _evaluate_columns(columns: Mapping, kwargs: dict, base: Scene | None) -> BatchResult:
+def _evaluate_columns(columns: Mapping, kwargs: dict, base: Scene | None,
+                      solver: Callable | None = None) -> BatchResult:
     """evaluate_batch of columns ``{key: array}`` in this process (a study chunk's scene).
 
     Columns of SI floats on a base scene (a study's samples) have their scenes built by
@@ -171,9 +186,8 @@ def _evaluate_columns(columns: Mapping, kwargs: dict, base: Scene | None) -> Bat
     """
     columns = {k: np.asarray(v) for k, v in columns.items()}
     if not SceneColumns.accepts(base, columns):
-        return _evaluate_rows(as_rows(columns), kwargs, base)
-    from skidmc.solver import critical_height
-
+        return _evaluate_rows(as_rows(columns), kwargs, base, solver)
+    critical_height = resolve_solver(solver)
     scenes = SceneColumns(base, columns)
     m = len(scenes)
     out = empty_result(m)

@@ -1,4 +1,8 @@
 """Where chunks of samples are evaluated: in process, local worker processes, or dask.
+
+Local workers ignore SIGINT: a Ctrl-C at the terminal reaches the whole process group, and only
+the parent acts on it (it stops handing out chunks, keeps what is written and says so in one line);
+a worker finishes the chunk it holds and exits with the pool, without a traceback of its own.
 """
 
 from __future__ import annotations
@@ -9,26 +13,29 @@ import dataclasses
 import math
 import multiprocessing
 import os
+import re
+import signal
 import sys
 import time
-from collections.abc import Mapping
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
 from skidmc.ensemble.evaluate import BatchResult, empty_result, evaluate_here, record_given
+from skidmc.errors import SkidmcError
 from skidmc.scene import NUMERIC_KEYS, Scene
 
-if TYPE_CHECKING:
-    pass
-
 __all__ = [
+    "CONNECT_TIMEOUT",
+    "POOLS",
+    "SCHEDULER_CHOICES",
     "Chunk",
     "ChunkOut",
     "DaskExecutor",
     "InlineExecutor",
-    "POOLS",
     "ProcessExecutor",
+    "SchedulerError",
+    "check_scheduler",
     "default_workers",
     "evaluate_chunk",
     "failed_results",
@@ -36,6 +43,59 @@ __all__ = [
     "shutdown_workers",
     "worker_died",
 ]
+
+#: Seconds to wait for a dask scheduler at an address before giving up.
+CONNECT_TIMEOUT = 5.0
+
+#: What ``--scheduler`` accepts, in words (for help and messages).
+SCHEDULER_CHOICES = ("'local' (worker processes on this machine, the default), 'dask' (a local "
+                     "dask cluster of --workers processes) or the address of a running dask "
+                     "scheduler, tcp://host:port")
+
+_HOST = r"(\[[0-9a-fA-F:.]+\]|[A-Za-z0-9_.-]+)"
+_ADDRESS = re.compile(rf"^((tcp|tls|ucx|inproc)://{_HOST}(:\d{{1,5}})?|{_HOST}:\d{{1,5}})/?$")
+
+
+class SchedulerError(SkidmcError):
+    """A ``--scheduler`` value that is malformed, or a dask scheduler that cannot be reached.
+
+    Parameters
+    ----------
+    value : str
+        The value given.
+    reason : str
+        What is wrong.
+    """
+
+    def __init__(self, value: object, reason: str) -> None:
+        self.value = value
+        self.reason = reason
+        super().__init__(f"--scheduler {value!r}: {reason}")
+
+    def __reduce__(self):
+        return (type(self), (self.value, self.reason))
+
+
+def check_scheduler(scheduler):
+    """Validate a scheduler argument: None, ``"local"``, ``"dask"``, an address or a Client.
+
+    Returns
+    -------
+    The value unchanged (an address without ``/`` at the end).
+
+    Raises
+    ------
+    SchedulerError
+        A string that is none of these.
+    """
+    if scheduler is None or not isinstance(scheduler, str):
+        return scheduler
+    text = scheduler.strip()
+    if text in ("local", "dask"):
+        return text
+    if _ADDRESS.match(text):
+        return text.rstrip("/")
+    raise SchedulerError(scheduler, f"expected {SCHEDULER_CHOICES}")
 
 
 
@@ -54,6 +114,7 @@ class Chunk:
     overrides: list
     options: dict
     isolated: bool = False  # a retry of one sample after a worker died
+    solver: Callable | None = None  # None: skidmc.solver.critical_height
 
 
 @dataclasses.dataclass
@@ -80,7 +141,7 @@ def _peak_rss_mib() -> float:
 def evaluate_chunk(chunk: Chunk) -> ChunkOut:
     """Worker entry point (module level: picklable for processes and dask)."""
     began = time.time()
-    results = [evaluate_here(ov, chunk.options, sc)
+    results = [evaluate_here(ov, chunk.options, sc, chunk.solver)
                for sc, ov in zip(chunk.scenes, chunk.overrides)]
     return ChunkOut(results, os.getpid(), _peak_rss_mib(), began, time.time())
 
@@ -122,8 +183,9 @@ def _warm_worker(warm_up: dict | None) -> None:
 
     A small solve (paper-quartz at the given options) makes numba load the kernels from its
     cache (or compile them) now rather than in the first sample; its result is discarded, and
-    nothing it does can fail the worker.
+    nothing it does can fail the worker. The worker ignores SIGINT (module docstring).
     """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         from skidmc.solver import critical_height
 
@@ -237,10 +299,22 @@ atexit.register(shutdown_workers)
 
 
 class DaskExecutor:
-    """Chunks sent to a dask.distributed cluster (an address, a Client, or a LocalCluster)."""
+    """Chunks sent to a dask.distributed cluster (an address, a Client, or a LocalCluster).
+
+    Raises
+    ------
+    SchedulerError
+        dask.distributed is not installed, or no scheduler answers at the address within
+        :data:`CONNECT_TIMEOUT` seconds.
+    """
 
     def __init__(self, scheduler, workers: int | None) -> None:
-        from distributed import Client, LocalCluster
+        scheduler = check_scheduler(scheduler)
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise SchedulerError(scheduler, "needs dask.distributed, which is not installed "
+                                 "(pip install distributed)") from None
 
         self._own = []
         if scheduler is None or scheduler == "dask":
@@ -251,7 +325,14 @@ class DaskExecutor:
         if isinstance(scheduler, Client):
             self.client = scheduler
         else:
-            self.client = Client(scheduler)
+            try:
+                self.client = Client(scheduler, timeout=CONNECT_TIMEOUT)
+            except (OSError, TimeoutError) as exc:
+                for obj in self._own:
+                    obj.close()
+                raise SchedulerError(scheduler, f"no dask scheduler answered within "
+                                     f"{CONNECT_TIMEOUT:g} s ({type(exc).__name__}: {exc}); is "
+                                     "it running, and is the address right?") from None
             self._own.insert(0, self.client)
         self.workers = max(1, sum(self.client.nthreads().values()))
 

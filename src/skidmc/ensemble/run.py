@@ -14,6 +14,19 @@ Two levels:
   (:class:`skidmc.ensemble.storage.EnsembleFile`) at once, so memory does not grow with n and an
   interrupted run keeps every finished chunk (``--resume`` computes only the rest).
 
+The target file. A run never overwrites what it did not make (:func:`_plan`): a missing file is
+created; a complete file of this very study (same study text hash, same n) is up to date, verified
+(checksums) and reported, and nothing is computed; ``resume`` continues this study's unfinished
+file; ``force`` recomputes this study's file (any version, any n, or a damaged file) into
+``<name>.new`` beside it, renamed over it only when complete, so an interrupted forced run loses
+nothing (the next forced run continues the ``.new`` file); everything else (a foreign file,
+another study's, an unfinished file without ``resume``) is refused with a message saying what to
+do. A run that stops before writing any sample (an error, Ctrl-C) removes the file it created.
+Ctrl-C raises :class:`RunInterrupted`, whose ``hint`` says what was kept.
+
+The solver is injectable: ``solver=`` (default :func:`skidmc.solver.critical_height`) travels
+with every chunk to the worker that evaluates it (:mod:`skidmc.ensemble.evaluate`).
+
 Sample i gets the same inputs and, the solver being deterministic, the same result whatever the
 worker count, chunk size, scheduler or interruptions: inputs come from the design by index, and
 chunks only decide who computes what.
@@ -43,14 +56,17 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import signal
 import sys
+import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from skidmc.ensemble.evaluate import BatchResult, solver_kwargs
+from skidmc.ensemble.evaluate import BatchResult, resolve_solver, solver_kwargs
 from skidmc.ensemble.executors import (
     POOLS,
     Chunk,
@@ -58,6 +74,7 @@ from skidmc.ensemble.executors import (
     DaskExecutor,
     InlineExecutor,
     ProcessExecutor,
+    check_scheduler,
     default_workers,
 )
 from skidmc.ensemble.schedule import Schedule, run_chunks
@@ -69,11 +86,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DRAW_BLOCK",
+    "RunInterrupted",
     "RunReport",
     "execute_study",
     "run_study",
 ]
-
 
 
 #: Samples the parent draws from the design at once (then hands out slices as chunks).
@@ -111,6 +128,11 @@ class RunReport:
         With ``execute_study(..., timeline=True)``: per chunk, its samples, worker, solver time
         and the times [s from the start of `wall_time`] it was sent, began and ended in the
         worker, and was written.
+    action : str
+        What the run did with its file: ``"new"``, ``"resume"``, ``"replace"`` (``force``) or
+        ``"up_to_date"`` (a complete file of this very study was there: nothing computed).
+    completed : str
+        For ``"up_to_date"``: when the file was completed (its ``completed`` attribute).
     """
 
     path: Path
@@ -124,6 +146,8 @@ class RunReport:
     chunks: int = 0
     worker_peak_rss_mib: dict = dataclasses.field(default_factory=dict)
     timeline: list | None = None
+    action: str = "new"
+    completed: str = ""
 
     @property
     def rate(self) -> float:
@@ -156,6 +180,25 @@ def _resolve_out(study: Study, out) -> Path:
     return out if out.suffix in (".h5", ".nc", ".hdf5") else out / "ensemble.h5"
 
 
+def _target_exists(study, out) -> bool:
+    """Whether the result file of a run seems to exist, judged before the study is loaded
+    (its name read from the TOML file when the path depends on it); True when unsure."""
+    if out is not None and Path(out).suffix in (".h5", ".nc", ".hdf5"):
+        return Path(out).exists()
+    if hasattr(study, "name"):  # a Study
+        return _resolve_out(study, out).exists()
+    try:
+        import tomllib
+
+        with open(study, "rb") as f:
+            name = tomllib.load(f)["study"]["name"]
+    except Exception:  # noqa: BLE001 - unsure: the study's own loading reports any error
+        return True
+    target = Path("results") / str(name) / "ensemble.h5" if out is None else \
+        Path(out) / "ensemble.h5"
+    return target.exists()
+
+
 def _columns(names, scene_dimension: bool, draws: list[dict],
              results: list[BatchResult]) -> dict:
     """Arrays (scenes x samples, or samples) of the file's variables `names` for one chunk."""
@@ -173,28 +216,76 @@ def _columns(names, scene_dimension: bool, draws: list[dict],
     return {k: np.stack(v) if scene_dimension else v[0] for k, v in cols.items()}
 
 
-def _open_result_file(study: Study, path: Path, resume: bool) -> EnsembleFile:
-    """The file to write: a new one, or this study's unfinished one when resuming."""
-    from skidmc.ensemble.storage import EnsembleFile, StorageError, inspect_file
+def _plan(study: Study, path: Path, resume: bool, force: bool) -> str:
+    """What to do with the target, without touching it: ``"new"``, ``"resume"``,
+    ``"up_to_date"`` (a complete run of this very study: same text hash, same n) or
+    ``"replace"`` (``force``: compute into a new file that replaces this one when complete).
+
+    Raises
+    ------
+    StorageError
+        The target is refused: a foreign file, another study's run, this study's unfinished run
+        without `resume` or `force`, a damaged file without `force`.
+    """
+    from skidmc.ensemble.storage import StorageError, inspect_file
 
     if not path.exists():
-        from skidmc.ensemble.sampling import MC_BLOCK
-
-        attrs = {"mc_block": np.int64(MC_BLOCK)} if study.design.method == "mc" else {}
-        return EnsembleFile.create(path, study, attrs=attrs)
-    if resume:
-        return EnsembleFile.resume(path, study)
-    info = inspect_file(path)  # raises for a file that is not HDF5
+        return "new"
+    if path.is_dir():
+        raise StorageError(path, "is a folder; give a file name ending in .h5 or a folder "
+                           "that does not hold one of that name")
+    try:
+        info = inspect_file(path)
+    except StorageError as exc:
+        if force and exc.damaged:
+            return "replace"
+        raise
     if not info["skidmc"]:
         raise StorageError(path, "exists and is not a skidmc ensemble file; refusing to "
-                           "overwrite it (choose another --out)")
+                           "overwrite it, even with --force (choose another --out)")
+    name = info["study_name"]
+    same = info["study_sha256"] == study.sha256 and info["n_rows"] == study.n_rows
+    if not same:
+        if name != study.name:
+            raise StorageError(path, f"holds a run of another study ({name!r}, this is "
+                               f"{study.name!r}); refusing to overwrite it, even with --force: "
+                               "choose another --out")
+        if force:
+            return "replace"
+        what = ("another version of this study (its text changed)"
+                if info["study_sha256"] != study.sha256 else
+                f"{info['n_rows']} samples per scene, this run asks for {study.n_rows} "
+                "(a different --n?)")
+        raise StorageError(path, f"holds a run of study {name!r} with {what}; recompute it "
+                           "with --force (the old file stays until the new one is complete) "
+                           "or choose another --out")
+    if force:
+        return "replace"
     if info["complete"]:
-        raise StorageError(path, f"already holds a complete run of study "
-                           f"{info['study_name']!r}; refusing to overwrite it: delete it or "
-                           "choose another --out")
-    raise StorageError(path, f"holds an unfinished run of study {info['study_name']!r} "
+        return "up_to_date"
+    if resume:
+        return "resume"
+    raise StorageError(path, f"holds an unfinished run of study {name!r} "
                        f"({info['done']} of {info['n_rows']} samples written); continue it with "
-                       "--resume or choose another --out")
+                       "--resume, recompute it with --force, or choose another --out")
+
+
+def _open_result_file(study: Study, path: Path, action: str, work: Path) -> EnsembleFile:
+    """The file to write: a new one, this study's unfinished one (`resume`), or, for
+    ``"replace"``, the new file `work` beside the old one (continued if an interrupted --force
+    run of the same study left it)."""
+    from skidmc.ensemble.sampling import MC_BLOCK
+    from skidmc.ensemble.storage import EnsembleFile, StorageError
+
+    if action == "resume":
+        return EnsembleFile.resume(path, study)
+    if action == "replace" and work.exists():
+        try:
+            return EnsembleFile.resume(work, study)
+        except StorageError:  # ours by name, not this study's or damaged: start it again
+            work.unlink()
+    attrs = {"mc_block": np.int64(MC_BLOCK)} if study.design.method == "mc" else {}
+    return EnsembleFile.create(work if action == "replace" else path, study, attrs=attrs)
 
 
 def _executor(scheduler, use_dask: bool, workers: int | None):
@@ -210,27 +301,68 @@ def _executor(scheduler, use_dask: bool, workers: int | None):
     return DaskExecutor(None if scheduler == "local" else scheduler, workers), True
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """A run stopped by Ctrl-C (SIGINT); `hint` says what was kept and how to go on.
+
+    Parameters
+    ----------
+    hint : str
+        One sentence, e.g. ``"12 of 256 samples are saved in x.h5; continue with --resume"``.
+    """
+
+    def __init__(self, hint: str) -> None:
+        self.hint = hint
+        super().__init__(hint)
+
+
+def _interrupted_hint(path: Path, file_path: Path, action: str, done: int, n_rows: int,
+                      removed: bool) -> str:
+    if removed:
+        return "nothing was written (the new file was removed)"
+    if action == "replace":
+        return (f"{path} is unchanged; the new run's {done} of {n_rows} samples are in "
+                f"{file_path}: run again with --force to continue it")
+    return f"{done} of {n_rows} samples are saved in {path}; continue with --resume"
+
+
 def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None = None,
                   workers: int | None = None, scheduler=None, use_dask: bool = False,
-                  resume: bool = False, progress: bool | None = None,
+                  resume: bool = False, force: bool = False, progress: bool | None = None,
                   chunk_size: int | None = None, command: str | None = None,
-                  timeline: bool = False) -> RunReport:
+                  timeline: bool = False, solver: Callable | None = None) -> RunReport:
     """Run a study to its result file; like :func:`run_study` but returns a :class:`RunReport`.
 
     See :func:`run_study` for the parameters; in addition `chunk_size` sets the samples per chunk
     (default: sized by time, see the module docstring), `command` is the command line recorded
     in the file's history, and `timeline` records per-chunk timings in the report.
+
+    Raises
+    ------
+    RunInterrupted
+        A KeyboardInterrupt (Ctrl-C), with what was kept in its ``hint``.
     """
     from skidmc import __version__
+    from skidmc.ensemble.storage import timestamp
 
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise ValueError(f"workers must be an integer >= 1 (or None: all CPUs), got {workers!r}")
+    if resume and force:
+        raise ValueError("resume and force exclude each other: resume continues the file, "
+                         "force recomputes it")
+    scheduler = check_scheduler(scheduler)
+    if solver is not None:
+        resolve_solver(solver)  # a TypeError now rather than one per sample
     # Local worker processes start first, so that their start-up overlaps the loading of the
-    # study and the opening of the file (they are shut down below if there is nothing to do).
-    executor, t0 = None, None
-    if scheduler in (None, "local") and not use_dask and (workers or default_workers()) > 1:
+    # study and the opening of the file, unless the target file exists already (it may be up to
+    # date: then no worker is wanted at all).
+    executor, owned, t0 = None, False, None
+    if scheduler in (None, "local") and not use_dask and (workers or default_workers()) > 1 \
+            and not _target_exists(study, out):
         executor, owned = _executor(scheduler, use_dask, workers)
         t0 = time.perf_counter()
+    file = None
     try:
-        from skidmc.ensemble.storage import timestamp
         from skidmc.ensemble.study import Study, load_study
 
         if not isinstance(study, Study):
@@ -241,8 +373,23 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
         command = command or f"run_study({study.file!r}, n={study.design.n})"
         report = RunReport(path=path, n_rows=study.n_rows, n_scenes=len(study.scenes),
                            timeline=[] if timeline else None)
-        with _open_result_file(study, path, resume) as file:
-            todo = ~file.done()
+        action = _plan(study, path, resume, force)
+        report.action = action
+        if action == "up_to_date":
+            from skidmc.ensemble.storage import inspect_file
+
+            info = inspect_file(path, verify=True)  # a damaged file is not up to date
+            report.completed = str(info.get("completed", ""))
+            return report
+        # An owned dask cluster is reached before any file is made, so that an unreachable
+        # scheduler leaves nothing behind.
+        if executor is None and not (scheduler in (None, "local") and not use_dask):
+            executor, owned = _executor(scheduler, use_dask, workers)
+        work = path.with_name(path.name + ".new")  # --force: the new file until complete
+        created = action == "new" or (action == "replace" and not work.exists())
+        file = _open_result_file(study, path, action, work)
+        todo = ~file.done()
+        try:
             if todo.any():
                 file.add_history(f"{timestamp()} skidmc {__version__}: {command}: started with "
                                  f"{study.n_rows - int(todo.sum())} of {study.n_rows} samples "
@@ -251,18 +398,42 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                     executor, owned = _executor(scheduler, use_dask, workers)
                 report.workers = executor.workers
                 schedule = Schedule(todo, len(study.scenes), executor.workers, chunk_size,
-                                     balance=executor.workers > 1)
+                                    balance=executor.workers > 1)
                 del todo
                 outcome = "interrupted"
                 try:
-                    _evaluate_chunks(study, file, executor, schedule, report, progress, t0)
+                    with _DeferredInterrupt() as interrupt:
+                        _evaluate_chunks(study, file, executor, schedule, report, progress, t0,
+                                         solver, interrupt.check)
                     outcome = "finished"
                 finally:
                     file.add_history(f"{timestamp()} skidmc {__version__}: {outcome}: "
                                      f"{report.summary()}")
             if not file.complete and file.done().all():
                 file.mark_complete()
+        except BaseException as exc:
+            try:
+                done = int(file.done().sum())
+            except Exception:  # noqa: BLE001 - only for the message
+                done = -1
+            file.close()
+            removed = created and done == 0
+            if removed:  # nothing computed: leave no half-made file behind
+                file.path.unlink(missing_ok=True)
+            if isinstance(exc, KeyboardInterrupt) and not isinstance(exc, RunInterrupted):
+                raise RunInterrupted(_interrupted_hint(path, file.path, action, done,
+                                                       study.n_rows, removed)) from None
+            raise
+        file.close()
+        if action == "replace":
+            os.replace(file.path, path)  # the old file is replaced only by a complete one
+    except KeyboardInterrupt as exc:
+        if isinstance(exc, RunInterrupted):
+            raise
+        raise RunInterrupted("nothing was written") from None
     finally:
+        if file is not None:
+            file.close()
         if executor is not None and owned:
             executor.shutdown()
     return report
@@ -284,10 +455,46 @@ class _Draws:
         return [{k: v[a:b] for k, v in d.items()} for d in self._block]
 
 
+class _DeferredInterrupt:
+    """SIGINT handling of the chunk loop: the first Ctrl-C stops the run at the next safe point
+    (:meth:`check`, after a chunk is written), not wherever Python happens to be: a
+    KeyboardInterrupt raised inside a weakref callback or a ``__del__`` (the executor's
+    machinery has both) is printed as "Exception ignored" and lost, and the run went on. A second
+    Ctrl-C raises at once. Installed only from the main thread over Python's default handler
+    (a custom handler, e.g. a notebook's, is left alone)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._old = None
+
+    def __enter__(self) -> _DeferredInterrupt:  # noqa: PYI034 - not subclassed
+        if threading.current_thread() is threading.main_thread() \
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._old = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def check(self) -> None:
+        """Raise KeyboardInterrupt if Ctrl-C was pressed."""
+        if self.requested:
+            raise KeyboardInterrupt
+
+    def __exit__(self, *exc) -> None:
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+
+
 def _evaluate_chunks(study: Study, file: EnsembleFile, executor, schedule: Schedule,
-                     report: RunReport, progress: bool | None, t0: float | None = None) -> None:
+                     report: RunReport, progress: bool | None, t0: float | None = None,
+                     solver: Callable | None = None, check_interrupt=None) -> None:
     """Send the study's chunks to `executor` (:func:`run_chunks`) and write each one as soon
-    as it is back; `t0` is when the workers were launched (default: now)."""
+    as it is back; `t0` is when the workers were launched (default: now); `solver` as in
+    :func:`run_study`; `check_interrupt()` is called after each chunk is written (it raises
+    KeyboardInterrupt to stop)."""
     from tqdm.auto import tqdm
 
     from skidmc.ensemble.sampling import StudySampler
@@ -303,7 +510,7 @@ def _evaluate_chunks(study: Study, file: EnsembleFile, executor, schedule: Sched
     def make_chunk(start: int, stop: int, isolated: bool):
         drawn = draws(start, stop)
         overrides = [{k: v for k, v in d.items() if k in SI_UNITS} for d in drawn]
-        chunk = Chunk(start, stop, base_scenes, overrides, options, isolated)
+        chunk = Chunk(start, stop, base_scenes, overrides, options, isolated, solver)
         return chunk, (drawn, time.perf_counter() - t0)
 
     def consume(chunk: Chunk, context, results: list[BatchResult], out: ChunkOut) -> None:
@@ -327,6 +534,8 @@ def _evaluate_chunks(study: Study, file: EnsembleFile, executor, schedule: Sched
                 "solver_s": solver, "sent_s": sent, "began_s": out.began - t_wall,
                 "ended_s": out.ended - t_wall, "written_s": time.perf_counter() - t0})
         bar.update(m)
+        if check_interrupt is not None:
+            check_interrupt()
 
     bar = tqdm(total=study.n_rows * n_scenes, initial=(study.n_rows - schedule.remaining)
                * n_scenes, unit="sample", desc=study.name, file=sys.stderr, dynamic_ncols=True,
@@ -342,7 +551,8 @@ def _evaluate_chunks(study: Study, file: EnsembleFile, executor, schedule: Sched
 def run_study(study_path_or_obj: Study | str | os.PathLike, out=None, n: int | None = None,
               workers: int | None = None, scheduler=None, resume: bool = False,
               progress: bool | None = None, *, use_dask: bool = False,
-              chunk_size: int | None = None) -> Path:
+              chunk_size: int | None = None, force: bool = False,
+              solver: Callable | None = None) -> Path:
     """Run a study and write its ensemble file.
 
     Parameters
@@ -362,12 +572,21 @@ def run_study(study_path_or_obj: Study | str | os.PathLike, out=None, n: int | N
         must be able to import skidmc).
     resume : bool
         Continue an unfinished file of the same study (a missing file starts a new run).
+    force : bool
+        Recompute: the run writes a new file beside the target (``<name>.new``) and renames it
+        over the target only when complete, so an interrupted forced run loses nothing (the next
+        forced run continues the ``.new`` file). Replaces this study's file (any version of it,
+        any n) or a damaged file; never a file of another study or a foreign file.
     progress : bool, optional
         Progress bar on stderr; None: only when stderr is a terminal.
     use_dask : bool
         Use a dask LocalCluster of `workers` processes (as ``scheduler="dask"``).
     chunk_size : int, optional
         Samples per chunk (does not change any result).
+    solver : callable, optional
+        Instead of :func:`skidmc.solver.critical_height` (see
+        :func:`skidmc.ensemble.batch.evaluate_batch`); with worker processes it must pickle
+        (a module-level function).
 
     Returns
     -------
@@ -379,10 +598,15 @@ def run_study(study_path_or_obj: Study | str | os.PathLike, out=None, n: int | N
     StudyError
         The study is invalid.
     StorageError
-        The target exists and is not this study's unfinished run to resume (a complete file, a
-        foreign file, another study's or an unfinished run without `resume`): nothing is
-        overwritten.
+        The target exists and is not this study's run to resume or replace (a foreign file,
+        another study's, an unfinished or damaged file without `resume`/`force`), or the file
+        cannot be created there: nothing is overwritten. A complete file of this very study (same
+        text, same n) is not an error: it is up to date and nothing is computed.
+    SchedulerError
+        `scheduler` is malformed or no dask scheduler answers at it.
+    RunInterrupted
+        Ctrl-C; what was kept is in its ``hint``.
     """
     return execute_study(study_path_or_obj, out, n=n, workers=workers, scheduler=scheduler,
-                         use_dask=use_dask, resume=resume, progress=progress,
-                         chunk_size=chunk_size).path
+                         use_dask=use_dask, resume=resume, force=force, progress=progress,
+                         chunk_size=chunk_size, solver=solver).path

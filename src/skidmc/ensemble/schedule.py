@@ -5,21 +5,17 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from skidmc.ensemble.executors import ChunkOut, evaluate_chunk, failed_results, worker_died
 
-if TYPE_CHECKING:
-    pass
-
 __all__ = [
     "FIRST_CHUNK_EVALUATIONS",
     "MAX_CHUNK_EVALUATIONS",
     "MIN_CHUNK_SECONDS",
-    "Schedule",
     "TARGET_CHUNK_SECONDS",
+    "Schedule",
     "run_chunks",
 ]
 

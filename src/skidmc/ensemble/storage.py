@@ -13,18 +13,36 @@ reads it without skidmc. Layout (``scene`` only for studies with ``[[scenes]]``)
                 created/completed timestamps, history (one line per run)
 
 Crash safety. A kill -9 must not lose a finished chunk nor corrupt the file, so: the file skeleton
-is built under a temporary name and renamed into place; every variable is contiguous and
-allocated at creation (HDF5 early allocation), so writing a chunk changes raw data only, never
-the file's metadata; strings are fixed-width (char arrays that xarray decodes to ``str``), not
-variable-length strings whose heap would be metadata; and the ``done`` flags of a chunk are
-written and flushed only after its data were flushed. A chunk interrupted half-way has no done
-flags and is simply computed again on ``--resume``.
+is built under a temporary name and renamed into place; every variable is allocated at creation
+(HDF5 early allocation), so writing a chunk changes raw data only, never the file's metadata;
+strings are fixed-width (char arrays that xarray decodes to ``str``), not variable-length strings
+whose heap would be metadata; and the ``done`` flags of a chunk are written and flushed only after
+its data were flushed. A chunk interrupted half-way has no done flags and is simply computed again
+on ``--resume``.
+
+Checksums. Every variable is chunked (HDF5 chunks, not the runner's) with HDF5's Fletcher-32
+filter, so damage anywhere in the data (a truncated copy, bytes overwritten in the middle of the
+file) is detected when the file is read back: :func:`verify_file` reads every variable once, and
+resuming or reporting a complete file up to date does so first. Fletcher-32 keeps the two rules
+above: it does not change a chunk's stored size (data + 4 bytes), so HDF5 rewrites a chunk in
+place at the address allocated at creation and the chunk index never changes after creation
+(tests/test_storage.py checks that writing changes no byte outside the chunks' data). What it adds
+is that a chunk is one checksummed unit: a write torn half-way would make the whole HDF5 chunk
+unreadable, samples of earlier runner chunks that share it included, where contiguous storage
+only ever lost not-yet-done samples. Linux copies a write into the page cache a page at a time and
+stops a killed process's write only between pages, so no HDF5 chunk is larger than one 4096-byte
+page (:data:`CHUNK_BYTES` of data + the checksum) and every chunk starts on a page boundary (HDF5
+alignment at creation): a chunk is then written whole or not at all by a killed process. (A power
+cut or a kernel crash can still tear a page; the checksum then reports the file as damaged instead
+of letting bad numbers through, and ``skidmc run --force`` recomputes it.)
 """
 
 from __future__ import annotations
 
 import dataclasses
 import datetime
+import errno
+import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -38,14 +56,19 @@ from skidmc.errors import SkidmcError
 from skidmc.scene import DESCRIPTIONS, NUMERIC_KEYS, SI_UNITS
 
 __all__ = [
+    "CHUNK_BYTES",
     "FORMAT",
+    "PAGE_BYTES",
     "EnsembleFile",
+    "SceneSummary",
     "StorageError",
     "VariableSpec",
     "default_path",
     "ensemble_variables",
     "inspect_file",
+    "summarize_file",
     "timestamp",
+    "verify_file",
 ]
 
 #: Value of the ``skidmc_format`` attribute that marks an ensemble file (and its version).
@@ -54,9 +77,21 @@ FORMAT = "skidmc-ensemble 1"
 #: Values of ``status``.
 STATUSES = ("ok", "censored_above", "censored_below", "failed")
 
+#: Page size [bytes] that no HDF5 chunk crosses (see the module docstring, "Checksums").
+PAGE_BYTES = 4096
+
+#: Largest HDF5 chunk of a per-sample variable [bytes of data]: with its 4-byte Fletcher-32
+#: checksum it fills at most one page.
+CHUNK_BYTES = PAGE_BYTES - 4
+
+#: Samples read at once by :func:`verify_file` (bounds its memory: a 256-byte text variable of
+#: 5 scenes is read 80 MiB at a time).
+VERIFY_SAMPLES = 1 << 16
+
 
 class StorageError(SkidmcError):
-    """A result file that cannot be written or continued: foreign, unfinished, another study's.
+    """A result file that cannot be written or continued: foreign, unfinished, another study's,
+    damaged, or a place where no file can be created.
 
     Parameters
     ----------
@@ -64,15 +99,19 @@ class StorageError(SkidmcError):
         The file.
     reason : str
         What is wrong and what to do about it.
+    damaged : bool
+        The file is (or may be) a skidmc result that cannot be read back: truncated, or its data
+        fail their checksums (``skidmc run --force`` replaces it).
     """
 
-    def __init__(self, path: str | os.PathLike, reason: str) -> None:
+    def __init__(self, path: str | os.PathLike, reason: str, damaged: bool = False) -> None:
         self.path = str(path)
         self.reason = reason
+        self.damaged = damaged
         super().__init__(f"{self.path}: {reason}")
 
     def __reduce__(self):
-        return (type(self), (self.path, self.reason))
+        return (type(self), (self.path, self.reason, self.damaged))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,44 +205,137 @@ def _early() -> h5py.h5p.PropDCID:
     return dcpl
 
 
+def _chunk_shape(lead: tuple, n: int, sample_bytes: int, width: int = 0) -> tuple:
+    """HDF5 chunk of a per-sample variable: one scene, as many samples as fit in
+    :data:`CHUNK_BYTES` (at most n), the whole string."""
+    k = max(1, min(n, CHUNK_BYTES // sample_bytes))
+    return (*(1,) * (len(lead) - 1), k, *((width,) if width else ()))
+
+
+_DAMAGED_HINT = ("if it is a skidmc result, recompute it with `skidmc run --force` (or restore "
+                 "a copy); the file is left as it is")
+
+
 def _open(path: Path, mode: str) -> h5py.File:
     # Plain h5py once the file exists: the netCDF structure is fixed at creation, and from then
     # on only raw data and attributes change (h5py is also quicker per write than h5netcdf).
     try:
         return h5py.File(path, mode)
-    except BlockingIOError:
-        raise StorageError(path, "is open in another process (a run still going?); wait for it "
-                           "or stop it first") from None
     except OSError as exc:
-        if "lock" in str(exc):
-            raise StorageError(path, "is open in another process (a run still going?): "
-                               f"{exc}") from None
-        raise StorageError(path, f"cannot open as HDF5: {exc}") from None
+        text = str(exc)
+        if isinstance(exc, BlockingIOError) or exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK) \
+                or "unable to lock file" in text.lower():
+            raise StorageError(path, "is open in another process (a run still going?); wait "
+                               "for it or stop it first") from None
+        if isinstance(exc, PermissionError) or exc.errno == errno.EACCES:
+            access = "writing" if mode != "r" else "reading"
+            raise StorageError(path, f"cannot be opened for {access}: permission denied") \
+                from None
+        if "truncated file" in text:
+            raise StorageError(path, f"is damaged: the file is truncated ({text}); "
+                               f"{_DAMAGED_HINT}", damaged=True) from None
+        raise StorageError(path, f"is damaged or not a valid HDF5 file ({text}); {_DAMAGED_HINT}",
+                           damaged=True) from None
 
 
-def inspect_file(path: str | os.PathLike) -> dict:
+def _read_all(name: str, ds: h5py.Dataset, path: Path, axis: int | None) -> None:
+    """Read a dataset once (HDF5 checks every chunk's Fletcher-32 checksum as it reads it), in
+    slabs of :data:`VERIFY_SAMPLES` along its sample axis `axis` (None: at once)."""
+    n = 1 if axis is None else ds.shape[axis]
+    step = VERIFY_SAMPLES
+    if axis is not None and ds.chunks:
+        step = max(ds.chunks[axis], step // ds.chunks[axis] * ds.chunks[axis])
+    for start in range(0, n, step):
+        stop = min(n, start + step)
+        sl = [slice(None)] * len(ds.shape or ())
+        if axis is not None:
+            sl[axis] = slice(start, stop)
+        try:
+            ds[tuple(sl)]
+        except (OSError, ValueError, RuntimeError) as exc:
+            where = f" (samples {start}-{stop - 1})" if axis is not None else ""
+            raise StorageError(path, f"is damaged: variable {name!r} cannot be read back{where}:"
+                               f" a checksum mismatch or corrupt data ({exc}); {_DAMAGED_HINT}",
+                               damaged=True) from None
+
+
+def verify_file(path: str | os.PathLike) -> None:
+    """Read every variable of a file once, so that HDF5 checks each chunk's checksum.
+
+    Parameters
+    ----------
+    path : path
+        An ensemble file (files written before checksums were added are read all the same: their
+        data have no checksum, but their structure is still checked).
+
+    Raises
+    ------
+    StorageError
+        With ``damaged=True``: the file cannot be opened (truncated, corrupt metadata) or a
+        variable cannot be read back (a checksum mismatch).
+    """
+    path = Path(path)
+    with _open(path, "r") as f:
+        datasets: list[tuple[str, h5py.Dataset]] = []
+        try:
+            f.visititems(lambda name, obj: datasets.append((name, obj))
+                         if isinstance(obj, h5py.Dataset) else None)
+        except (OSError, KeyError, RuntimeError, ValueError) as exc:
+            raise StorageError(path, f"is damaged: its structure cannot be read ({exc}); "
+                               f"{_DAMAGED_HINT}", damaged=True) from None
+        n_rows = f["done"].shape[0] if isinstance(f.get("done"), h5py.Dataset) else None
+        for name, ds in datasets:
+            shape = ds.shape or ()
+            # The sample axis: the last but the text width for text, else the last.
+            axis = len(shape) - (2 if ds.dtype == "S1" else 1)
+            _read_all(name, ds, path, axis if axis >= 0 and shape[axis] == n_rows else None)
+
+
+def inspect_file(path: str | os.PathLike, *, verify: bool = False) -> dict:
     """What an existing file is, without changing it.
+
+    Parameters
+    ----------
+    path : path
+    verify : bool
+        Also read every variable once (:func:`verify_file`: checksums) when it is an ensemble
+        file.
 
     Returns
     -------
     dict
         ``skidmc`` (bool: an ensemble file), ``complete`` (bool), ``done``/``n_rows`` (samples
-        written / in the design), ``study_name``, ``study_sha256``, ``history``.
+        written / in the design), ``study_name``, ``study_sha256``, ``history``, ``completed``
+        (timestamp or "").
 
     Raises
     ------
     StorageError
-        Not an HDF5 file, or it cannot be opened.
+        Not an HDF5 file, it cannot be opened, or (``damaged=True``) it is damaged.
     """
     path = Path(path)
-    if not h5py.is_hdf5(path):
+    try:
+        hdf5 = h5py.is_hdf5(path)
+    except OSError as exc:
+        raise StorageError(path, f"cannot be read: {exc.strerror or exc}") from None
+    if not hdf5:
+        if path.stat().st_size == 0:
+            raise StorageError(path, "is an empty file (a truncated result?); delete it, "
+                               "replace it with `skidmc run --force` or choose another --out",
+                               damaged=True)
         raise StorageError(path, "exists but is not an HDF5 file: not a skidmc result; "
                            "refusing to overwrite it (choose another --out)")
     with _open(path, "r") as f:
-        attrs = dict(f.attrs)
-        if attrs.get("skidmc_format") != FORMAT or "done" not in f:
-            return {"skidmc": False, "format": attrs.get("skidmc_format")}
-        done = f["done"][:]
+        try:
+            attrs = dict(f.attrs)
+            if attrs.get("skidmc_format") != FORMAT or "done" not in f:
+                return {"skidmc": False, "format": attrs.get("skidmc_format")}
+            done = f["done"][:]
+        except (OSError, KeyError, RuntimeError, ValueError) as exc:
+            raise StorageError(path, f"is damaged: its attributes or done flags cannot be read "
+                               f"({exc}); {_DAMAGED_HINT}", damaged=True) from None
+    if verify:
+        verify_file(path)
     return {
         "skidmc": True,
         "complete": bool(attrs.get("complete", 0)),
@@ -212,6 +344,7 @@ def inspect_file(path: str | os.PathLike) -> dict:
         "study_name": attrs.get("study_name"),
         "study_sha256": attrs.get("study_sha256"),
         "history": attrs.get("history", ""),
+        "completed": attrs.get("completed", ""),
     }
 
 
@@ -259,11 +392,24 @@ class EnsembleFile:
         path = Path(path)
         if path.exists():
             raise StorageError(path, "exists; refusing to overwrite it")
-        path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".tmp")  # ours by name: a stale one is a killed create
-        with h5netcdf.File(tmp, "w") as f:
-            _write_skeleton(f, study, {**_global_attrs(study, history), **dict(attrs or {})})
-        os.replace(tmp, path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            # Chunks of at least the smallest chunk's size start on a page boundary (module
+            # docstring, "Checksums"): every HDF5 chunk then lies within one page.
+            smallest = min(_chunk_bytes(study))
+            with h5netcdf.File(tmp, "w", alignment_threshold=smallest,
+                               alignment_interval=PAGE_BYTES) as f:
+                _write_skeleton(f, study, {**_global_attrs(study, history),
+                                           **dict(attrs or {})})
+            os.replace(tmp, path)
+        except OSError as exc:
+            try:
+                tmp.unlink(missing_ok=True)
+            except OSError:  # nowhere to have made it (a path through a file)
+                pass
+            raise StorageError(path, f"cannot create the result file: {_os_reason(path, exc)}") \
+                from None
         return cls(path, _open(path, "r+"), study)
 
     @classmethod
@@ -276,7 +422,7 @@ class EnsembleFile:
             Not a skidmc ensemble file, another study (hash), or another sample count.
         """
         path = Path(path)
-        info = inspect_file(path)
+        info = inspect_file(path, verify=True)
         if not info["skidmc"]:
             raise StorageError(path, "is an HDF5 file but not a skidmc ensemble; refusing to "
                                "touch it (choose another --out)")
@@ -354,6 +500,39 @@ class EnsembleFile:
         self.close()
 
 
+def _os_reason(path: Path, exc: OSError) -> str:
+    """Why a file cannot be created at `path`, in words naming the path that is in the way."""
+    where = Path(exc.filename) if exc.filename else path
+    if isinstance(exc, (FileExistsError, NotADirectoryError)) or exc.errno in (
+            errno.EEXIST, errno.ENOTDIR):
+        for parent in path.parents:  # the nearest existing ancestor that is not a folder
+            if parent.exists() and not parent.is_dir():
+                return f"{parent} is a file, not a folder"
+    if isinstance(exc, PermissionError) or exc.errno in (errno.EACCES, errno.EPERM):
+        return f"permission denied for {where}"
+    if exc.errno == errno.EROFS:
+        return f"{where} is on a read-only file system"
+    if exc.errno == errno.ENOSPC:
+        return f"no space left on the device of {where}"
+    if isinstance(exc, FileNotFoundError):
+        return f"{where} cannot be created (no such file or directory)"
+    return f"{exc.strerror or exc} ({where})"
+
+
+def _sample_bytes(spec: VariableSpec) -> int:
+    return spec.width if spec.dtype == "str" else np.dtype(spec.dtype).itemsize
+
+
+def _chunk_bytes(study: Study) -> list[int]:
+    """Stored size [bytes] of each chunked variable's HDF5 chunk (data + checksum)."""
+    n = study.n_rows
+    sizes = [min(n, CHUNK_BYTES // b) * b + 4 for b in (8, 1)]  # sample, done
+    for spec in ensemble_variables(study):
+        b = _sample_bytes(spec)
+        sizes.append(max(1, min(n, CHUNK_BYTES // b)) * b + 4)
+    return sizes
+
+
 def _write_skeleton(f: h5netcdf.File, study: Study, attrs: Mapping) -> None:
     """Dimensions, coordinates, attributes and every variable, allocated, nothing evaluated."""
     n = study.n_rows
@@ -361,7 +540,15 @@ def _write_skeleton(f: h5netcdf.File, study: Study, attrs: Mapping) -> None:
                                     else {})}
     lead = ("scene", "sample") if study.scene_dimension else ("sample",)
     f.attrs.update(attrs)
-    sample = f.create_variable("sample", ("sample",), dtype="i8", dcpl=_early())
+    lead_shape = (len(study.scenes), n) if study.scene_dimension else (n,)
+
+    def chunked(spec_bytes: int, width: int = 0) -> dict:
+        """Chunking, checksums and early allocation (a fresh property list each time)."""
+        return {"chunks": _chunk_shape(lead_shape, n, spec_bytes, width), "fletcher32": True,
+                "dcpl": _early()}
+
+    sample = f.create_variable("sample", ("sample",), dtype="i8",
+                               **{**chunked(8), "chunks": _chunk_shape((n,), n, 8)})
     sample.attrs.update({"units": "1", "long_name": "sample index in the design"})
     step = 1 << 16  # in slices: memory flat in n
     for i in range(0, n, step):
@@ -380,14 +567,18 @@ def _write_skeleton(f: h5netcdf.File, study: Study, attrs: Mapping) -> None:
             char_dim = f"strlen{spec.width}"
             if char_dim not in f.dimensions:
                 f.dimensions[char_dim] = spec.width
-            v = f.create_variable(spec.name, (*lead, char_dim), dtype="S1", dcpl=_early())
+            v = f.create_variable(spec.name, (*lead, char_dim), dtype="S1",
+                                  **chunked(spec.width, spec.width))
             v.attrs["_Encoding"] = "utf-8"
         elif spec.dtype == "f8":  # NaN until written
-            v = f.create_variable(spec.name, lead, dtype="f8", fillvalue=np.nan, dcpl=_early())
+            v = f.create_variable(spec.name, lead, dtype="f8", fillvalue=np.nan,
+                                  **chunked(8))
         else:
-            v = f.create_variable(spec.name, lead, dtype=spec.dtype, dcpl=_early())
+            v = f.create_variable(spec.name, lead, dtype=spec.dtype,
+                                  **chunked(_sample_bytes(spec)))
         v.attrs.update({"units": spec.units, "long_name": spec.long_name, **dict(spec.attrs)})
-    done = f.create_variable("done", ("sample",), dtype="u1", dcpl=_early())
+    done = f.create_variable("done", ("sample",), dtype="u1",
+                             **{**chunked(1), "chunks": _chunk_shape((n,), n, 1)})
     done.attrs.update({"units": "1",
                        "long_name": "1 once the sample's results are written (resume bookkeeping)"})
 
@@ -418,3 +609,96 @@ def _global_attrs(study: Study, history: str) -> dict:
         "complete": np.int8(0),
         "history": history,
     }
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneSummary:
+    """The critical heights of one scene of an ensemble file, in a few numbers.
+
+    Quantiles are empirical (``numpy.quantile(..., method="inverted_cdf")``: always a sample's
+    value) over the written samples that did not fail, censored ones at the bound they hit, so
+    that a quantile falling among censored samples is that bound, marked by `median_bound` /
+    `range_bound` (``">"`` above h_max, ``"<"`` below h_min, else ``""``).
+
+    Attributes
+    ----------
+    scene : str
+        Scene name (the study name for a single-scene study).
+    samples, written : int
+        Samples in the design, samples written so far.
+    ok, censored_above, censored_below, failed : int
+        Written samples by status.
+    median, p05, p95 : float
+        Median and 5 % / 95 % quantiles of the critical height [m] (NaN when no sample counts).
+    median_bound : str
+    range_bound : tuple of str
+        Qualifiers of p05 and p95.
+    """
+
+    scene: str
+    samples: int
+    written: int
+    ok: int
+    censored_above: int
+    censored_below: int
+    failed: int
+    median: float
+    p05: float
+    p95: float
+    median_bound: str = ""
+    range_bound: tuple[str, str] = ("", "")
+
+
+def _decode_chars(chars: np.ndarray) -> np.ndarray:
+    """Fixed-width char array (..., width) -> array of str."""
+    width = chars.shape[-1]
+    joined = np.ascontiguousarray(chars).view(f"S{width}")[..., 0]
+    return np.char.decode(joined, "utf-8")
+
+
+def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
+    """Per-scene summary of an ensemble file's critical heights (see :class:`SceneSummary`).
+
+    Raises
+    ------
+    StorageError
+        The file cannot be read (``damaged=True`` when it is damaged).
+    """
+    path = Path(path)
+    with _open(path, "r") as f:
+        try:
+            attrs = dict(f.attrs)
+            done = f["done"][:].astype(bool)
+            heights = np.atleast_2d(f["critical_height"][...])
+            status = _decode_chars(f["status"][...])
+            names = ([s.decode() if isinstance(s, bytes) else str(s) for s in f["scene"][...]]
+                     if "scene" in f else [str(attrs.get("study_name", ""))])
+        except (OSError, KeyError, RuntimeError, ValueError) as exc:
+            raise StorageError(path, f"is damaged: its results cannot be read ({exc}); "
+                               f"{_DAMAGED_HINT}", damaged=True) from None
+    status = np.atleast_2d(status)
+    h_min, h_max = (float(np.ravel(attrs.get(k, np.nan))[0])
+                    for k in ("solver_h_min", "solver_h_max"))
+    out = []
+    for name, h, st in zip(names, heights, status):
+        h, st = h[done], st[done]
+        counts = {k: int(np.count_nonzero(st == k)) for k in STATUSES}
+        usable = h[(st != "failed") & np.isfinite(h)]
+        if usable.size:
+            p05, median, p95 = np.quantile(usable, [0.05, 0.5, 0.95], method="inverted_cdf")
+        else:
+            p05 = median = p95 = math.nan
+
+        def bound(q: float, counts=counts) -> str:
+            if counts["censored_above"] and q >= h_max:
+                return ">"
+            if counts["censored_below"] and q <= h_min:
+                return "<"
+            return ""
+
+        out.append(SceneSummary(
+            scene=name, samples=int(done.size), written=int(done.sum()), ok=counts["ok"],
+            censored_above=counts["censored_above"], censored_below=counts["censored_below"],
+            failed=counts["failed"], median=float(median), p05=float(p05), p95=float(p95),
+            median_bound=bound(median), range_bound=(bound(p05), bound(p95))))
+    return out

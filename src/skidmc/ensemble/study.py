@@ -87,8 +87,8 @@ import scipy.stats
 
 from skidmc.ensemble.study_model import (
     DESIGN_METHODS,
-    KINDS,
     EXTRA_KEYS,
+    KINDS,
     RATE_AT_REFERENCE,
     STUDY_RANGES,
     U_TAIL,

@@ -9,7 +9,7 @@
 - :mod:`~skidmc.solver.results`: :class:`HeightResult`.
 """
 
-from skidmc.solver.model import SkidModel, build_model
+from skidmc.solver.model import FLAG_MEANINGS, SkidModel, build_model
 from skidmc.solver.results import FT, HeightResult
 from skidmc.solver.search import DEFAULT_H_MAX, DEFAULT_H_MIN, TIERS, critical_height
 from skidmc.solver.simulate import Simulation, SolverError, simulate
@@ -17,6 +17,7 @@ from skidmc.solver.simulate import Simulation, SolverError, simulate
 __all__ = [
     "DEFAULT_H_MAX",
     "DEFAULT_H_MIN",
+    "FLAG_MEANINGS",
     "FT",
     "TIERS",
     "HeightResult",

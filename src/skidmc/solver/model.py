@@ -96,6 +96,27 @@ CRUSH_DEPTH_FRACTION = 0.1
 #: then conservative (too low).
 LONG_SLIDE_DIAMETERS = 1.0
 
+#: What each validity flag means for the reported height, in one line (for ``skidmc height``
+#: and reports; the full table with the criteria is in docs/model.md, "Validity flags").
+FLAG_MEANINGS: dict[str, str] = {
+    "no_friction": "mu = 0: no frictional heat, so no event; censored above without a "
+                   "simulation",
+    "stops_sliding": "the billet stops sliding before it rebounds: frictional heating ends "
+                     "early (Eq. 10)",
+    "stops_early": f"sliding stops within {EARLY_STOP_FRACTION:g} of the contact time: the "
+                   "height hangs on Eq. (10)'s stop rule and is very sensitive to the angle "
+                   "and mu",
+    "self_heating": f"the unheated HE at T0 runs away within {SELF_HEATING_TIME:g} s: a "
+                    "billet with these kinetics cannot be held at T0; not a friction result",
+    "hot_ignition": f"ignition needs the HE above {HOT_IGNITION_TEMPERATURE:g} K: a vaporising "
+                    "melt, room-temperature properties and kinetics far from data",
+    "crushed": f"at this height the indentation exceeds {CRUSH_DEPTH_FRACTION:g} D: the "
+               "billet is flattened and the contact model (cap law, rigid hemisphere) fails",
+    "long_slide": f"the contact slides over more than {LONG_SLIDE_DIAMETERS:g} contact "
+                  "diameter(s) while heating: fresh cold target is ignored, so the real height "
+                  "is higher (the model is conservative)",
+}
+
 
 @dataclass(frozen=True)
 class Resolution:
