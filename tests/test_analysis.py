@@ -55,7 +55,8 @@ def test_study_metadata_is_decoded(tmp_path, study_file):
     assert ds.attrs["solver"] == {"rtol": 1e-2, "tier": "full", "h_min": 1e-3, "h_max": 1e4}
     design = dict(ds.attrs["design"])
     keys = design.pop("keys")
-    assert design == {"method": "mc", "n": 12, "seed": 2024, "second_order": True}
+    assert design == {"method": "mc", "n": 12, "seed": 2024, "second_order": True,
+                      "n_epistemic": 0, "kinds": ["aleatory"] * 4}
     assert sorted(keys) == sorted(["mu", "target.conductivity", "kinetics.activation_temperature",
                                    "kinetics.prefactor"])
     assert list(ds.scene.values) == ["quartz", "alumina"]
@@ -96,4 +97,47 @@ def test_no_matplotlib():
             "print(skidmc.analysis.__all__)")
     out = subprocess.run([sys.executable, "-c", code], env=subprocess_env(), capture_output=True,
                          text=True, check=True)
-    assert out.stdout.strip() == "['open_ensemble']"
+    assert "'open_ensemble'" in out.stdout
+
+
+NESTED = """
+[study]
+name = "nested"
+[scene]
+preset = "paper-quartz"
+[uncertain.mu]
+distribution = "lognorm"
+s = 0.1
+relative = true
+kind = "aleatory"
+source = "test"
+[uncertain."kinetics.activation_temperature"]
+distribution = "uniform"
+loc = "24000 K"
+scale = "4000 K"
+kind = "epistemic"
+source = "test"
+[design]
+method = "lhs"
+n = 6
+n_epistemic = 4
+seed = 7
+[solver]
+rtol = 1e-2
+"""
+
+
+def test_a_nested_design_opens_as_epistemic_by_sample(tmp_path):
+    study = tmp_path / "nested.toml"
+    study.write_text(NESTED)
+    path = run_study(study, tmp_path / "n.h5", workers=1, progress=False, solver=fake_height)
+    ds = open_ensemble(path)
+    assert ds.critical_height.dims == ("epistemic", "sample")
+    assert ds.critical_height.shape == (4, 6)
+    assert ds.attrs["design"]["kinds"] == ["aleatory", "epistemic"]
+    # The epistemic input is constant within an epistemic draw and differs between draws; the
+    # aleatory one repeats across draws (common random numbers).
+    t_act = ds["kinetics.activation_temperature"].values
+    mu = ds["mu"].values
+    assert np.all(t_act == t_act[:, :1]) and len(np.unique(t_act[:, 0])) == 4
+    assert np.all(mu == mu[:1, :])

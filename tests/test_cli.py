@@ -349,3 +349,34 @@ def test_run_unreachable_scheduler_gives_up_quickly(tmp_path, tiny, cli_runs, ca
     assert err.startswith(f"skidmc run: error: --scheduler 'tcp://127.0.0.1:{port}': no dask "
                           "scheduler answered within 1 s")
     assert "Traceback" not in err and not out.exists() and not list(tmp_path.glob("s.h5*"))
+
+
+# --- skidmc report ---------------------------------------------------------------------------------
+
+
+def test_report_of_a_result_file(tmp_path, study_file, capsys):
+    from conftest import fake_height
+
+    from skidmc.ensemble.run import run_study
+
+    path = run_study(study_file, tmp_path / "r.h5", workers=1, progress=False, solver=fake_height)
+    assert main(["report", str(path), "--out", str(tmp_path / "rep")]) == 0
+    out = capsys.readouterr().out
+    # One line per scene with its H50 and interval, then where the report is.
+    assert re.search(r"^quartz: H50 [\d.e+-]+ ft \[", out, re.M)
+    assert out.strip().endswith(str(tmp_path / "rep" / "summary.md"))
+    for name in ("summary.md", "summary.json", "curves.h5", "go_quartz.png", "qq.png"):
+        assert (tmp_path / "rep" / name).is_file(), name
+
+
+def test_report_of_a_study_without_results_says_run_it_first(tmp_path, capsys):
+    study = tmp_path / "later.toml"
+    study.write_text(TINY.replace('name = "tiny"', 'name = "not-run-yet"'))
+    assert main(["report", str(study)]) == 2
+    assert "run it first: skidmc run" in capsys.readouterr().err
+
+
+def test_report_confidence_must_be_a_probability():
+    with pytest.raises(SystemExit) as info:
+        main(["report", "x.h5", "--confidence", "95"])
+    assert info.value.code == 2

@@ -14,7 +14,7 @@ import skidmc
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "skidmc"
 
 FRONT_DOOR = ("critical_height", "make_scene", "get_preset", "load_study", "run_study",
-              "evaluate_batch")
+              "evaluate_batch", "open_ensemble")
 
 
 @pytest.mark.parametrize("name", FRONT_DOOR)

@@ -39,6 +39,8 @@ _LAZY = {
     "load_study": "skidmc.ensemble.study",
     "run_study": "skidmc.ensemble.run",
     "evaluate_batch": "skidmc.ensemble.batch",
+    # analysis
+    "open_ensemble": "skidmc.analysis",
     # errors
     "SkidmcError": "skidmc.errors",
     "SceneError": "skidmc.errors",

@@ -385,6 +385,77 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- skidmc report ------------------------------------------------------------------------------
+
+
+def _add_report_parser(subparsers) -> None:
+    report = subparsers.add_parser(
+        "report", help="go-probability curves, log-normal fits, the experiments' verdict and "
+        "Sobol indices of a study's results",
+        description="Analyse a result file (or the result of a study file) and write figures, "
+        "summary.md, summary.json and curves.h5 beside it.",
+    )
+    report.add_argument("target", help="result file (.h5) or study file (.toml)")
+    report.add_argument("--out", help="folder for the report (default: the result file's)")
+    report.add_argument("--confidence", type=_unit_interval, default=0.95,
+                        help="coverage of every interval and band (default: %(default)g)")
+    report.set_defaults(func=_cmd_report)
+
+
+def _unit_interval(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {text!r}") from None
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text!r}")
+    return value
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    """``skidmc report``: exit status 0 written, 2 no usable result."""
+    from pathlib import Path
+
+    from skidmc.analysis import open_ensemble
+    from skidmc.analysis.report import write_report
+
+    target = Path(args.target)
+    if target.suffix == ".toml":
+        from skidmc.ensemble.storage import default_path
+        from skidmc.ensemble.study import load_study
+
+        study = load_study(target)
+        path = default_path(study)
+        if not path.is_file():
+            print(f"skidmc report: error: {target}: no result yet at {path}; run it first: "
+                  f"skidmc run {target}", file=sys.stderr)
+            return 2
+    else:
+        path = target
+    ds = open_ensemble(path)
+    if ds.attrs["unfinished"]:
+        print(f"skidmc report: warning: {path}: {ds.attrs['unfinished']} samples unfinished; "
+              "the report uses the finished ones (finish with skidmc run --resume)",
+              file=sys.stderr)
+    out = Path(args.out) if args.out else path.parent
+    result = write_report(ds, out, source=str(args.target), confidence=args.confidence)
+    for a in result["analyses"]:
+        if a.fit is None:
+            print(f"{a.scene}: too few exact critical heights for a fit")
+            continue
+        est, low, high = a.predicted_h50()
+        line = (f"{a.scene}: H50 {est:.3g} ft [{low:.3g}, {high:.3g}], sigma ln H "
+                f"{a.fit.sigma:.2f}; {a.fit.verdict}")
+        if a.experiment is not None:
+            e = a.experimental_h50()
+            shown = (f"> {e[1]:.3g}" if a.experiment.h50_qualifier == "lower_bound"
+                     else f"{e[0]:.3g} [{e[1]:.3g}, {e[2]:.3g}]")
+            line += f"; experiment {a.experiment.name}: {shown} ft"
+        print(line)
+    print(out / "summary.md")
+    return 0
+
+
 # --- parser and entry point ----------------------------------------------------------------------
 
 
@@ -438,6 +509,7 @@ def build_parser() -> argparse.ArgumentParser:
     height.set_defaults(func=_cmd_height)
 
     _add_run_parser(subparsers)
+    _add_report_parser(subparsers)
     return parser
 
 

@@ -1,7 +1,19 @@
 """Analysis of ensemble results; :func:`open_ensemble` is the one way in.
 
 Every analysis reads a result file through :func:`open_ensemble`, which checks what it opens and
-hands back plain xarray. Nothing here imports matplotlib: plotting modules import it themselves.
+hands back plain xarray. Modules:
+
+- :mod:`~skidmc.analysis.gonogo`: go/no-go statistics (probit with profile-likelihood intervals,
+  Dixon-Mood up-down, censored log-normal fits, empirical go curves with simultaneous bands,
+  scores);
+- :mod:`~skidmc.analysis.experiments`: the report's drops, 50 % heights and friction;
+- :mod:`~skidmc.analysis.sensitivity`: Sobol' indices with bootstrap intervals, groups, Morris;
+- :mod:`~skidmc.analysis.rare_events` and :mod:`~skidmc.analysis.hazard`: rare-event
+  probabilities and the drop-height hazard estimator;
+- :mod:`~skidmc.analysis.report`: what ``skidmc report`` writes.
+
+Figures are drawn by functions that take a matplotlib ``ax``; nothing here imports matplotlib at
+import time.
 """
 
 from __future__ import annotations
@@ -9,12 +21,48 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from skidmc.analysis.experiments import EXPERIMENTS, get_experiment
+from skidmc.analysis.gonogo import (
+    compare_h50,
+    fit_lognormal,
+    fit_probit,
+    go_curve,
+    score_drops,
+    updown,
+)
+from skidmc.analysis.hazard import drop_height_probability
+from skidmc.analysis.rare_events import rare_event_probability
+from skidmc.analysis.sensitivity import (
+    grow_until_stable,
+    morris_screening,
+    sobol_convergence,
+    sobol_indices,
+    sobol_stable,
+)
+
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10: the same parser, packaged as tomli
     import tomli as tomllib
 
-__all__ = ["open_ensemble"]
+__all__ = [
+    "EXPERIMENTS",
+    "compare_h50",
+    "drop_height_probability",
+    "fit_lognormal",
+    "fit_probit",
+    "get_experiment",
+    "go_curve",
+    "grow_until_stable",
+    "morris_screening",
+    "open_ensemble",
+    "rare_event_probability",
+    "score_drops",
+    "sobol_convergence",
+    "sobol_indices",
+    "sobol_stable",
+    "updown",
+]
 
 
 def open_ensemble(path: str | os.PathLike):
@@ -42,7 +90,8 @@ def open_ensemble(path: str | os.PathLike):
         - ``attrs["unfinished"]``: the number of such samples (0 for a complete run);
         - ``attrs["study"]``: the study file's text parsed back (a dict, as TOML reads it),
           ``attrs["solver"]``: ``{"rtol", "tier", "h_min", "h_max"}``, ``attrs["design"]``:
-          ``{"method", "n", "seed", "keys", "second_order"}`` (besides the flat attributes the
+          ``{"method", "n", "seed", "keys", "second_order", "n_epistemic", "kinds"}`` (besides the
+          flat attributes the
           file stores: ``solver_rtol``, ``seed``, ...). These three are dicts, which netCDF
           cannot store: drop them before ``Dataset.to_netcdf``.
 
@@ -105,5 +154,30 @@ def open_ensemble(path: str | os.PathLike):
         "method": scalar("design_method"), "n": scalar("design_n"), "seed": scalar("seed"),
         "keys": [str(k) for k in np.atleast_1d(keys)] if len(np.atleast_1d(keys)) else [],
         "second_order": bool(scalar("saltelli_second_order")),
+        "n_epistemic": int(scalar("design_n_epistemic") or 0),
+        "kinds": [str(k) for k in np.atleast_1d(attrs.get("design_kinds", []))],
     }
+    n_epistemic = attrs["design"]["n_epistemic"]
+    if n_epistemic:
+        ds = _unnest(ds, n_epistemic)
     return ds
+
+
+def _unnest(ds, n_epistemic: int):
+    """Split the flat ``sample`` dim of a nested design into ``epistemic`` x ``sample``."""
+    import numpy as np
+    import xarray as xr
+
+    n_aleatory = ds.sizes["sample"] // n_epistemic
+    out = {}
+    for name, var in ds.data_vars.items():
+        if "sample" not in var.dims:
+            out[name] = var
+            continue
+        axis = var.dims.index("sample")
+        shape = var.shape[:axis] + (n_epistemic, n_aleatory) + var.shape[axis + 1:]
+        dims = var.dims[:axis] + ("epistemic", "sample") + var.dims[axis + 1:]
+        out[name] = xr.DataArray(var.values.reshape(shape), dims=dims, attrs=var.attrs)
+    coords = {k: v for k, v in ds.coords.items() if "sample" not in v.dims}
+    coords.update(epistemic=np.arange(n_epistemic), sample=np.arange(n_aleatory))
+    return xr.Dataset(out, coords=coords, attrs=ds.attrs)

@@ -598,6 +598,9 @@ def _global_attrs(study: Study, history: str) -> dict:
         "design_method": d.method,
         "design_n": np.int64(d.n),
         "design_keys": list(study.keys),
+        # Nested designs: row r is epistemic draw r // design_n, aleatory draw r % design_n.
+        "design_n_epistemic": np.int64(d.n_epistemic),
+        "design_kinds": [study.kind(k) for k in study.keys],
         "seed": np.int64(d.seed),
         "saltelli_second_order": np.int8(d.second_order),
         "solver_rtol": s.rtol,
