@@ -251,8 +251,11 @@ def test_run_of_a_committed_complete_result_is_up_to_date(tmp_path, monkeypatch,
     captured = capsys.readouterr()
     assert captured.out.strip() == "results/paper-series1/ensemble.h5"
     err = captured.err.splitlines()
+    from skidmc.ensemble.study import load_study
+
+    rows = load_study(ROOT / "studies" / "paper-series1.toml").n_rows
     assert err[0].startswith("results/paper-series1/ensemble.h5: up to date (a complete run of "
-                             "this study, n = 256, completed 20")
+                             f"this study, n = {rows}, completed 20")
     assert err[0].endswith("nothing computed (--force recomputes it)")
     assert [line.split()[0] for line in err[2:]] == ["gold", "alumina-smooth", "alumina-rough",
                                                      "quartz"]

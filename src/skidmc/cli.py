@@ -332,6 +332,37 @@ def _scene_summary_lines(path) -> list[str]:
     return lines
 
 
+def _growing_study(args: argparse.Namespace) -> int | None:
+    """A saltelli study with ``n_max``: grow N until its Sobol' indices are stable (exit
+    status), or None for any other study (including one that does not load: the run reports
+    it)."""
+    from skidmc.ensemble.study import load_study
+
+    try:
+        study = load_study(args.study)
+    except SkidmcError:
+        return None
+    if not study.design.n_max or args.n is not None:
+        return None
+    from skidmc.analysis.sobol_study import run_until_stable
+    from skidmc.ensemble.run import RunInterrupted
+
+    try:
+        steps = run_until_stable(study, args.out, workers=args.workers,
+                                 progress=False if args.quiet else None,
+                                 log=lambda line: print(f"skidmc run: {line}", file=sys.stderr))
+    except RunInterrupted as exc:
+        print(f"skidmc run: interrupted; {exc.hint}", file=sys.stderr)
+        return 130
+    except SkidmcError as exc:
+        print(f"skidmc run: error: {exc}", file=sys.stderr)
+        return 2
+    stable = all(steps[-1]["stable"].values())
+    print(f"skidmc run: N = {steps[-1]['n']}: Sobol' indices "
+          f"{'stable' if stable else 'NOT stable (n_max reached)'}", file=sys.stderr)
+    return 0
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     """``skidmc run``: exit status 0 done (or up to date), 2 invalid study, option or result
     file, 130 interrupted."""
@@ -347,6 +378,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"skidmc run: warning: --workers {args.workers} is far above the {cpus} CPUs "
               "available; running anyway, but the workers will share the CPUs (no faster than "
               f"--workers {cpus}) and each holds its own memory", file=sys.stderr)
+    growth = _growing_study(args)
+    if growth is not None:
+        return growth
     try:
         report = execute_study(
             args.study, args.out, n=args.n, workers=args.workers, scheduler=args.scheduler,

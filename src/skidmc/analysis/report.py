@@ -49,6 +49,7 @@ __all__ = [
     "analyse_ensemble",
     "analyse_scene",
     "ensemble_sobol",
+    "scene_names",
     "scene_outcomes",
     "write_report",
 ]
@@ -63,7 +64,7 @@ _CENSORING = {"ok": "", "censored_above": "above", "censored_below": "below"}
 EPISTEMIC_BAND = (0.05, 0.95)
 
 
-def _scene_names(ds: xr.Dataset) -> list[str]:
+def scene_names(ds: xr.Dataset) -> list[str]:
     return [str(s) for s in ds["scene"].values] if "scene" in ds.dims else [ds.attrs.get(
         "study_name", "scene")]
 
@@ -348,7 +349,7 @@ def analyse_ensemble(ds: xr.Dataset, *, experiments: Mapping[str, str] | None = 
     if experiments is None:
         experiments = _study_experiments(ds)
     return [analyse_scene(ds, s, experiment=experiments.get(s), confidence=confidence)
-            for s in _scene_names(ds)]
+            for s in scene_names(ds)]
 
 
 def _study_experiments(ds: xr.Dataset) -> dict[str, str]:

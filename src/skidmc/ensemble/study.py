@@ -51,6 +51,9 @@ run with a :class:`StudyError` naming the file, the key and the value. The forma
     seed = 20240601
     # n_epistemic = 32                  # with aleatory AND epistemic inputs: outer draws, each
     #                                   # with n aleatory samples (32 x 256 rows)
+    # n_max = 4096                      # saltelli: double N until every index above
+    #                                   # stable_threshold (0.1) has a half-width
+    #                                   # <= stable_half_width (0.05), reusing the rows
 
     [solver]                            # skidmc.solver.critical_height arguments
     rtol = 1e-2
@@ -131,7 +134,8 @@ _TOP_LEVEL = ("study", "scene", "scenes", "uncertain", "correlation", "design", 
 _STUDY_KEYS = ("name", "description")
 _SCENE_RESERVED = ("name", "preset", "uncertain", "experiment")
 _DIST_META = ("distribution", "source", "relative", "reference_temperature", "kind")
-_DESIGN_KEYS = ("method", "n", "seed", "second_order", "n_epistemic")
+_DESIGN_KEYS = ("method", "n", "seed", "second_order", "n_epistemic", "n_max",
+                "stable_threshold", "stable_half_width")
 _SOLVER_KEYS = ("rtol", "tier", "h_min", "h_max")
 _CORRELATION_KEYS = ("keys", "spearman", "gaussian", "source")
 _NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
@@ -646,8 +650,27 @@ class _Parser:
             if method == "saltelli":
                 raise self.error("design.n_epistemic", n_epistemic, "a nested design takes mc, "
                                  "lhs or sobol, not saltelli")
+        growth = {}
+        if "n_max" in table:
+            n_max = table["n_max"]
+            if method != "saltelli":
+                raise self.error("design.n_max", n_max, "only for method = 'saltelli' (grows N "
+                                 "until the Sobol' indices are stable)")
+            check_n(self.file, method, n_max, key="design.n_max")
+            if n_max < n:
+                raise self.error("design.n_max", n_max, f"must be >= design.n ({n})")
+            growth["n_max"] = int(n_max)
+        for name, default in (("stable_threshold", 0.1), ("stable_half_width", 0.05)):
+            if name in table:
+                value = table[name]
+                if "n_max" not in table:
+                    raise self.error("design." + name, value, "only with design.n_max")
+                if (isinstance(value, bool) or not isinstance(value, numbers.Real)
+                        or not 0 < value < 1):
+                    raise self.error("design." + name, value, "expected a number in (0, 1)")
+                growth[name] = float(value)
         return DesignSpec(method=method, n=n, seed=seed, second_order=second,
-                          n_epistemic=n_epistemic)
+                          n_epistemic=n_epistemic, **growth)
 
     def solver(self, table: object) -> SolverOptions:
         table = self.table(table, "solver")

@@ -184,6 +184,12 @@ class DesignSpec:
         ``saltelli`` only: rows for second-order indices too.
     n_epistemic : int
         Epistemic draws of a nested design (0: not nested); each gets `n` aleatory samples.
+    n_max : int
+        ``saltelli`` only: grow N (doubling, reusing the rows computed) up to this until the
+        indices are stable (0: run N only); see :mod:`skidmc.analysis.sobol_study`.
+    stable_threshold, stable_half_width : float
+        The stability rule: every index whose interval reaches above the threshold has an
+        interval half-width of at most `stable_half_width` [1].
     """
 
     method: str
@@ -191,6 +197,9 @@ class DesignSpec:
     seed: int
     second_order: bool = True
     n_epistemic: int = 0
+    n_max: int = 0
+    stable_threshold: float = 0.1
+    stable_half_width: float = 0.05
 
 
 @dataclasses.dataclass(frozen=True)
