@@ -16,14 +16,20 @@ acted yet. The report's own method, geometric bisection on go/no-go, is kept as
 """
 
 
+import dataclasses
 import math
 import time
 
 from skidmc.errors import SceneError
 from skidmc.solver.model import build_model
 from skidmc.solver.plan import (
+    MAX_ADAPTIVE_LEVEL,
+    ROOT_SHARE,
+    a_posteriori_error,
     extrapolated_error,
+    first_pair_level,
     melt_bias,
+    melt_bias_bound,
     melt_width_for_rtol,
     modelled_error,
     plan_for_rtol,
@@ -117,16 +123,27 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     if melt_width is not None and not (isinstance(melt_width, (int, float))
                                        and melt_width > 0.0):
         raise SceneError("melt_width", melt_width, "must be a number > 0 [K]")
-    if level is None:
+    # The default: Richardson pairs refined until their own (a posteriori) error estimate meets
+    # rtol, the calibrated model choosing only the first pair. A forced level, a given model or
+    # extrapolate=False keep one plan, with the calibrated model's estimate.
+    adaptive = level is None and model is None and extrapolate is not False
+    if adaptive:
+        level, extrapolate = first_pair_level(rtol), True
+    elif level is None:
         level, planned = plan_for_rtol(rtol)
         extrapolate = planned if extrapolate is None else extrapolate
     extrapolate = bool(extrapolate) and model is None and level >= 1.0
     if melt_width is None:
-        # The same width at every level of the search (coarse start, Richardson pair).
+        # The same width at every level of the search (coarse start, Richardson pairs).
         melt_width = melt_width_for_rtol(rtol, level)
     common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
                   runaway_fraction=runaway_fraction, melt_width=float(melt_width))
-    x_tol = root_tolerance(rtol, level, extrapolate, melt_width)
+    if adaptive:
+        # The root finder's share is fixed: the a posteriori estimate, not the calibrated
+        # model, decides whether the discretisation fits what is left.
+        x_tol = ROOT_SHARE * rtol
+    else:
+        x_tol = root_tolerance(rtol, level, extrapolate, melt_width)
     if not extrapolate:
         res = _search(scene, rtol, level, x_tol, model=model, h_guess=h_guess, **common)
         res.wall_time = time.perf_counter() - start
@@ -134,7 +151,8 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
 
     # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
     # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
-    # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
+    # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all (a refined pair's coarse
+    # level is the previous fine one, with half: 5/6 of it).
     coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
     # The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
     # errors are negative and shrink 4x per level; the fine level keeps 1/4 of it): the
@@ -144,16 +162,47 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
                    overshoot=0.75 * modelled_error(level - 1.0),
                    slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history),
                    **common)
-    fine.evaluations += coarse.evaluations
-    fine.wall_time = time.perf_counter() - start
-    if fine.censored is None and coarse.censored is None:
-        correction = (fine.critical_height - coarse.critical_height) / 3.0
-        fine.critical_height += correction
-        fine.richardson_correction = correction / fine.critical_height
-        fine.extrapolated = True
-        fine.error_estimate = (extrapolated_error(level) + x_tol
-                               + melt_bias(fine.terms, melt_width, level))
-    return fine
+    evaluations = coarse.evaluations + fine.evaluations
+    res = _richardson(coarse, fine, x_tol, melt_width, adaptive)
+    while (adaptive and res.extrapolated and res.error_estimate > rtol
+           and fine.level + 1.0 <= MAX_ADAPTIVE_LEVEL):
+        # Refine: the next level's root is predicted from this pair (its error is a quarter
+        # of the fine level's, which is about the correction), and the pair moves up a level.
+        correction = res.richardson_correction
+        guess = res.critical_height * (1.0 - 0.25 * correction)
+        finer = _search(scene, rtol, fine.level + 1.0, 0.5 * x_tol, h_guess=guess,
+                        overshoot=0.5 * abs(correction) + x_tol,
+                        slope=margin_slope(fine.history),
+                        go_slope=go_side_slope(fine.history), **common)
+        evaluations += finer.evaluations
+        coarse, fine = fine, finer
+        res = _richardson(coarse, fine, x_tol, melt_width, adaptive)
+    res.evaluations = evaluations
+    res.wall_time = time.perf_counter() - start
+    return res
+
+
+def _richardson(coarse, fine, x_tol, melt_width, adaptive):
+    """The Richardson value of a pair of searches (a new result; ``fine`` if either is censored).
+
+    Its ``error_estimate`` [1] is, for the default (``adaptive``) search, measured on the pair:
+    :func:`a_posteriori_error` of its correction, plus the melting width's bias bound and the
+    root finder's tolerance ``x_tol``; otherwise the calibrated model's.
+    """
+    res = dataclasses.replace(fine, history=list(fine.history))
+    if fine.censored is not None or coarse.censored is not None:
+        return res
+    correction = (fine.critical_height - coarse.critical_height) / 3.0
+    res.critical_height = fine.critical_height + correction
+    res.richardson_correction = correction / res.critical_height
+    res.extrapolated = True
+    if adaptive:
+        res.error_estimate = (a_posteriori_error(res.richardson_correction, coarse.level)
+                              + melt_bias_bound(fine.terms, melt_width) + x_tol)
+    else:
+        res.error_estimate = (extrapolated_error(fine.level) + x_tol
+                              + melt_bias(fine.terms, melt_width, fine.level))
+    return res
 
 def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
             melt_width, model=None, h_guess=None, overshoot=None, slope=None, go_slope=None):
@@ -213,7 +262,11 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
                                guess_error=overshoot or FAST_GUESS_ERROR)
         censored = None
     elif h_guess is not None:
-        x_root, censored = guided_root(margin, math.log(h_guess), slope, x_tol, x_min, x_max), None
+        # Sliding stops before rebound: the margin may jump at the root. Start at the predicted
+        # root, half the guess's uncertainty up, and bracket it within that uncertainty.
+        spread = 0.5 * (overshoot or FAST_GUESS_ERROR)
+        x_root, censored = guided_root(margin, math.log(h_guess) + spread, slope, x_tol, x_min,
+                                       x_max, spread=spread), None
     if x_root is None:
         x_root, censored = brent_root(margin, x_min, x_max, x_tol,
                                        math.log(model.end_time / model.exit_time), h_guess,
