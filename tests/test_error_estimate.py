@@ -83,7 +83,9 @@ def _ratios(rtol, reference_rtol):
     for name, scene in SCENES:
         res = critical_height(scene, rtol=rtol, h_min=H_MIN, h_max=H_MAX)
         ref = critical_height(scene, rtol=reference_rtol, h_min=H_MIN, h_max=H_MAX)
-        assert res.error_estimate <= rtol * (1.0 + 1e-12) or res.level >= 4.0, name
+        if res.censored is None:
+            # The default search refines until its estimate meets rtol (or its finest level).
+            assert res.error_estimate <= rtol * (1.0 + 1e-12) or res.level >= 4.0, name
         if res.censored or ref.censored:
             # A censoring may differ only where the reference lies within the estimate of
             # the bound.
