@@ -38,6 +38,7 @@ from skidmc.solver.plan import (
 from skidmc.solver.results import HeightResult
 from skidmc.solver.roots import (
     FAST_GUESS_ERROR,
+    FOLD_SLOPE,
     bisection_root,
     brent_root,
     go_side_root,
@@ -47,7 +48,13 @@ from skidmc.solver.roots import (
 )
 from skidmc.solver.simulate import simulate
 
-__all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "TIERS", "critical_height"]
+__all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "MELT_SHIFT_FACTOR", "TIERS",
+           "critical_height"]
+
+#: The melting width's bias b(w) on the critical height [1] from the root's shift dx when the
+#: width is doubled: b(w) = 1.3-1.9 dx on the report presets (concave, first order in w); 2.5
+#: bounds it with 30 % to spare (:func:`_melt_width_bias`).
+MELT_SHIFT_FACTOR = 2.5
 
 #: Model fidelity tiers: "full" (the report's model, converged to rtol) and "fast" (the
 #: reduced model of :mod:`skidmc.fast`, ~10-20 us per height, a few percent off the full model).
@@ -163,8 +170,16 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
                    slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history),
                    **common)
     evaluations = coarse.evaluations + fine.evaluations
-    res = _richardson(coarse, fine, x_tol, melt_width, adaptive)
+    melt = None
+    if adaptive:
+        melt, extra = _melt_width_bias(scene, coarse, common)
+        evaluations += extra
+    res = _richardson(coarse, fine, x_tol, melt_width, adaptive, melt)
+    # Refine while the pair's own error is what exceeds rtol: a finer level cannot shrink the
+    # width's bias (a width measured to bias the height by more than rtol leaves an estimate
+    # above rtol: the result says so).
     while (adaptive and res.extrapolated and res.error_estimate > rtol
+           and res.melt_bias_estimate + x_tol < rtol
            and fine.level + 1.0 <= MAX_ADAPTIVE_LEVEL):
         # Refine: the next level's root is predicted from this pair (its error is a quarter
         # of the fine level's, which is about the correction), and the pair moves up a level.
@@ -176,13 +191,52 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
                         go_slope=go_side_slope(fine.history), **common)
         evaluations += finer.evaluations
         coarse, fine = fine, finer
-        res = _richardson(coarse, fine, x_tol, melt_width, adaptive)
+        res = _richardson(coarse, fine, x_tol, melt_width, adaptive, melt)
     res.evaluations = evaluations
     res.wall_time = time.perf_counter() - start
     return res
 
 
-def _richardson(coarse, fine, x_tol, melt_width, adaptive):
+def _melt_width_bias(scene, coarse, common):
+    """Measured bias of the melting step's width on ln H [1], and the simulations it took.
+
+    Only for scenes whose ignition temperature (:attr:`SkidModel.ignition_temperature`) lies
+    below the melting point, where the calibrated bound does not apply.
+
+    One simulation at the coarse level with the width doubled, at the coarse search's go point
+    closest to its root: the margin's change over the go side's slope is the root's shift
+    dx from w to 2w. The bias is close to first order in w and concave (quartz: b(2 K) = 1.9 x
+    (b(4 K) - b(2 K)), b(1 K) = 1.3 x (b(2 K) - b(1 K)); results/validation/melt_width_bias.md),
+    so b(w) ~ dx; :data:`MELT_SHIFT_FACTOR` |dx| bounds it. Returns (None, 0) without melting
+    or where no smooth go side is known (a margin that jumps or folds at the root: there the
+    calibrated bound alone is used).
+    """
+    if coarse.censored is not None or "melting" not in coarse.terms:
+        return None, 0
+    if not build_model(scene, level=coarse.level, melting=common["melting"],
+                       meshes=False).ignition_temperature < scene.he_melting_point:
+        # The calibrated bound was measured on scenes that ignite above the melting point
+        # (the presets: T_ign ~600 K, 47 K above it); there it holds, and a level-0 shift
+        # overstates the bias (3.5x on paper-quartz). Below it, the runaway starts where the
+        # smoothed step releases its latent heat, and the bias is the scene's own (15x the
+        # bound at E/R = 15,000 K with a fast prefactor).
+        return None, 0
+    slope = go_side_slope(coarse.history)
+    go = [(h, m) for h, m in coarse.history if math.isfinite(m) and m <= 0.0]
+    if slope is None or slope < -FOLD_SLOPE or not go:
+        return None, 0
+    height, m_go = go[0]
+    kwargs = ({} if common["runaway_fraction"] is None
+              else {"runaway_fraction": common["runaway_fraction"]})
+    model = build_model(scene, level=coarse.level, melting=common["melting"],
+                        melt_width=2.0 * common["melt_width"], **kwargs)
+    m_wide = simulate(model, height).margin
+    if not math.isfinite(m_wide):
+        return None, 1
+    return MELT_SHIFT_FACTOR * abs(m_wide - m_go) / -slope, 1
+
+
+def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None):
     """The Richardson value of a pair of searches (a new result; ``fine`` if either is censored).
 
     Its ``error_estimate`` [1] is, for the default (``adaptive``) search, measured on the pair:
@@ -197,8 +251,10 @@ def _richardson(coarse, fine, x_tol, melt_width, adaptive):
     res.richardson_correction = correction / res.critical_height
     res.extrapolated = True
     if adaptive:
+        # The width's bias: the calibrated bound, or what this scene measured if larger.
+        res.melt_bias_estimate = max(melt_bias_bound(fine.terms, melt_width), melt or 0.0)
         res.error_estimate = (a_posteriori_error(res.richardson_correction, coarse.level)
-                              + melt_bias_bound(fine.terms, melt_width) + x_tol)
+                              + res.melt_bias_estimate + x_tol)
     else:
         res.error_estimate = (extrapolated_error(fine.level) + x_tol
                               + melt_bias(fine.terms, melt_width, fine.level))
