@@ -309,3 +309,20 @@ def test_exit_from_constants_equals_contact_and_stop_time():
         assert t_exit == pytest.approx(expected[0], rel=1e-12, abs=0.0)
         kinds.add(expected[1])
     assert kinds == {"rebound", "stops_sliding"}
+
+
+def test_batched_inputs_are_validated_like_scenes():
+    # The batched entry takes raw columns: a value a Scene would refuse (here a negative target
+    # conductivity, which used to come back censored "above") raises, naming key, value and row.
+    from skidmc.errors import SceneError
+    from skidmc.solver.fast import fast_critical_heights, scene_columns
+
+    cols = scene_columns([get_preset("paper-quartz")] * 3)
+    cols["target_conductivity"] = np.array([1.7, -1.0, 2.0])
+    with pytest.raises(SceneError) as err:
+        fast_critical_heights(**cols)
+    assert err.value.key == "target.conductivity" and "row 1" in str(err.value)
+    cols = scene_columns([get_preset("paper-quartz")])
+    cols["initial_temperature"] = np.array([600.0])  # above the melting point
+    with pytest.raises(SceneError):
+        fast_critical_heights(**cols)

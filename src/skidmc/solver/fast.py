@@ -37,7 +37,7 @@ from skidmc.physics.mechanics import (
     STANDARD_GRAVITY,
     impact_constants,
 )
-from skidmc.scene.keys import FIELDS, NUMERIC_KEYS
+from skidmc.scene.keys import FIELDS, NUMERIC_KEYS, bound_reason, in_bounds
 from skidmc.solver.model import build_model
 from skidmc.solver.results import HeightResult
 
@@ -55,6 +55,9 @@ SCENE_FIELDS: tuple[str, ...] = tuple(FIELDS[key] for key in NUMERIC_KEYS)
 
 #: The scene's values in the kernels' argument order (a Scene stores validated floats).
 _scene_values = operator.attrgetter(*SCENE_FIELDS)
+
+#: Scene key (skidmc.scene.keys) of each field, for the errors of :func:`_check_columns`.
+_KEY_OF_FIELD = {key.replace(".", "_"): key for key in NUMERIC_KEYS}
 
 _CENSOR_NAMES = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
 _EXIT_NAMES = {EXIT_REBOUND: "rebound", EXIT_STOPS_SLIDING: "stops_sliding"}
@@ -146,6 +149,12 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
         One 1-D array (or scalar, broadcast) per name of :data:`SCENE_FIELDS` (Scene attribute
         names, SI units, angles in degrees). All are required.
 
+    Raises
+    ------
+    SceneError
+        A value a :class:`~skidmc.scene.Scene` would refuse (the full tier's ranges), naming
+        the key, the value and its row; or ``h_min``, ``h_max`` out of order.
+
     Returns
     -------
     dict
@@ -155,8 +164,11 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
     missing = [f for f in SCENE_FIELDS if f not in columns]
     if missing:
         raise TypeError(f"missing columns: {missing}")
+    if not (0.0 < h_min < h_max):
+        raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
     arrays = np.broadcast_arrays(*[np.asarray(columns[f], dtype=float) for f in SCENE_FIELDS])
-    arrays = [np.ascontiguousarray(np.atleast_1d(a), dtype=float) for a in arrays]
+    arrays = [np.array(np.atleast_1d(a), dtype=float) for a in arrays]  # own, writable copies
+    _check_columns(arrays)
     if not melting:
         arrays[10] = np.zeros_like(arrays[10])
     n = arrays[0].shape[0]
@@ -168,6 +180,28 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
                         MELT_TABLE, _GL_X01, _GL_W01, N_TIMES, out_h, out_c, out_t, out_e)
     return {"critical_height": out_h, "censored": out_c, "exit_time": out_t,
             "exit_code": out_e}
+
+
+def _check_columns(arrays):
+    """Raise :class:`SceneError` for the first value a :class:`Scene` would refuse.
+
+    The same ranges as the full tier's scenes (:func:`skidmc.scene.keys.in_bounds`, every value
+    finite, T0 below the melting point), checked on whole columns; the error names the scene key,
+    the first offending value and its row.
+    """
+    for field, values in zip(SCENE_FIELDS, arrays):
+        key = _KEY_OF_FIELD[field]
+        bad = ~(np.isfinite(values) & in_bounds(key, values))
+        if bad.any():
+            row = int(np.argmax(bad))
+            raise SceneError(key, float(values[row]), f"{bound_reason(key)} (row {row})")
+    t0 = arrays[SCENE_FIELDS.index("initial_temperature")]
+    t_m = arrays[SCENE_FIELDS.index("he_melting_point")]
+    bad = ~(t0 < t_m)
+    if bad.any():
+        row = int(np.argmax(bad))
+        raise SceneError("initial_temperature", float(t0[row]),
+                         f"must be below he.melting_point ({float(t_m[row]):g} K) (row {row})")
 
 
 def scene_columns(scenes):

@@ -16,14 +16,20 @@ from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
 __all__ = [
     "DISCRETISATION_SHARE",
     "ERROR_LEVEL0",
+    "MAX_ADAPTIVE_LEVEL",
     "MAX_MELT_WIDTH",
     "MELT_SHARE",
     "RICHARDSON_ERROR_LEVEL0",
     "RICHARDSON_MIN_LEVEL",
+    "RICHARDSON_RESIDUAL_RATIO",
+    "RICHARDSON_RESIDUAL_RATIO_LEVEL0",
     "ROOT_SHARE",
+    "a_posteriori_error",
     "extrapolated_error",
+    "first_pair_level",
     "level_for_rtol",
     "melt_bias",
+    "melt_bias_bound",
     "melt_width_for_rtol",
     "modelled_error",
     "plan_for_rtol",
@@ -58,6 +64,24 @@ MAX_MELT_WIDTH = 4.0
 RICHARDSON_ERROR_LEVEL0 = 3.2e-3
 
 RICHARDSON_MIN_LEVEL = 1.0
+
+#: A posteriori error of a Richardson value R = H_L + c H_L, c = (H_L - H_{L-1}) / (3 H_L),
+#: measured per scene: the residual |R / H_ref - 1| is at most this multiple of the pair's own
+#: correction |c|. Measured against tight solves (levels 3 and 4) on the report presets and 22
+#: off-preset scenes (quartz, alumina, steel and an in-between target; mu 0.04-0.3; pendulum and
+#: vertical; E/R 15,000-34,000 K, one of them self-heating), tight root tolerance, melting
+#: widths 1-2 K: at most 0.37 |c| for the pairs (0.5, 1.5) and (1, 2), typically 0.01-0.3.
+#: 0.5 leaves 35 % to spare. ``benchmarks/solver.py`` reports, per rtol, the share of results
+#: whose whole estimate bounds their error; ``tests/test_error_estimate.py`` checks it.
+RICHARDSON_RESIDUAL_RATIO = 0.5
+#: The same for a pair whose coarse level is 0: level 0 is not always in the asymptotic range
+#: (on two of the 27 scenes its error is not 2-4x that of level 1: the residual of the (0, 1)
+#: value was 1.2 |c| and 1.5 |c|; otherwise <= 0.31 |c|). 0.75 bounds 25 of 27 scenes alone; the
+#: width's bias bound and the root tolerance, added to it in the reported estimate, cover the
+#: other two (tests/test_error_estimate.py checks the total).
+RICHARDSON_RESIDUAL_RATIO_LEVEL0 = 0.75
+#: Finest level the default search refines to when its a posteriori estimate exceeds rtol.
+MAX_ADAPTIVE_LEVEL = 4.0
 
 
 def melt_width_for_rtol(rtol, level=0.0):
@@ -124,6 +148,51 @@ def plan_for_rtol(rtol):
     if extrapolated < plain:
         return extrapolated, True
     return plain, False
+
+def first_pair_level(rtol):
+    """Fine level of the first Richardson pair ``(L - 1, L)`` the default search tries [1].
+
+    The calibrated model's plan (:func:`plan_for_rtol`), at least :data:`RICHARDSON_MIN_LEVEL`:
+    every default result is a Richardson value, so that its error is estimated from its own
+    pair (:func:`a_posteriori_error`). A plain-level plan ``L`` becomes the pair whose fine
+    level is ``L`` rounded up to a whole level.
+    """
+    level, extrapolate = plan_for_rtol(rtol)
+    if not extrapolate:
+        level = math.ceil(level - 1e-9)
+    return max(RICHARDSON_MIN_LEVEL, float(level))
+
+
+def a_posteriori_error(correction, coarse_level):
+    """Estimated discretisation error of a Richardson value [1], from its own pair.
+
+    Parameters
+    ----------
+    correction : float
+        (H_L - H_{L-1}) / (3 R) of the pair, R the extrapolated height [1].
+    coarse_level : float
+        L - 1.
+
+    Returns
+    -------
+    float
+        :data:`RICHARDSON_RESIDUAL_RATIO` |correction| (or
+        :data:`RICHARDSON_RESIDUAL_RATIO_LEVEL0` |correction| when ``coarse_level`` is 0).
+    """
+    ratio = (RICHARDSON_RESIDUAL_RATIO_LEVEL0 if coarse_level < 0.5
+             else RICHARDSON_RESIDUAL_RATIO)
+    return ratio * abs(correction)
+
+
+def melt_bias_bound(terms, melt_width):
+    """Bound on the relative bias of a smoothed melting step of width ``melt_width`` [1].
+
+    :data:`skidmc.solver.model.MELT_WIDTH_BIAS_PER_K` * w when the scene melts, else 0. Unlike
+    :func:`melt_bias`, it is not dropped at the level's floor width: a Richardson pair keeps
+    one width at both levels, so its difference does not see the width's bias.
+    """
+    return MELT_WIDTH_BIAS_PER_K * melt_width if "melting" in terms else 0.0
+
 
 def melt_bias(terms, melt_width, level):
     """Bound on the relative bias of the smoothed melting step [1].

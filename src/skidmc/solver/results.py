@@ -33,6 +33,9 @@ class HeightResult:
     richardson_correction : float
         Relative size of that extrapolation's correction [1]: an a-posteriori error
         indicator of the finer level alone (0 when not extrapolated).
+    melt_bias_estimate : float
+        The part of ``error_estimate`` that bounds the smoothed melting step's bias [1]: the
+        calibrated bound, or the bias measured on this scene when larger (default search).
     rtol, level, method, wall_time, exit_time, exit_kind, terms
         Settings and diagnostics (wall_time [s], exit_time [s]).
     """
@@ -51,6 +54,7 @@ class HeightResult:
     terms: tuple = ()
     extrapolated: bool = False
     richardson_correction: float = 0.0
+    melt_bias_estimate: float = 0.0
     history: list = field(default_factory=list, repr=False)
 
     @property

@@ -18,8 +18,10 @@ __all__ = [
     "DEFAULT_GO_SLOPE",
     "DEFAULT_GO_SLOPE_ERROR",
     "FAST_GUESS_ERROR",
+    "FOLD_SLOPE",
     "GO_BEND",
     "GO_SECANT_SPAN",
+    "JUMP_SLOPE",
     "bisection_root",
     "brent_root",
     "go_side_root",
@@ -53,6 +55,17 @@ GO_SECANT_SPAN = 0.1
 #: error, kappa d_a d_b / (2 |s|)). Measured 0.39 on paper2-quartz (secant through d = 0.034
 #: and 0.106 missed by 1.4e-3); 1.0 leaves a factor 2.5 to spare.
 GO_BEND = 1.0
+#: Steepest secant [1, d margin / d ln H] across a bracket of a margin that is smooth through
+#: its root: t_ev ~ H^-s gives |slope| 1.1-1.35 on the go side, ~30 % less on the no-go side.
+#: A jump (the event before the heating fades, or never) gives 0.3-0.5 of margin over a
+#: bracket of ~1e-3 or less, hundreds; 10 separates the two at every bracket the searches use
+#: (at most ~0.03 wide: a 0.3 jump is then still steeper).
+JUMP_SLOPE = 10.0
+#: Steepest go-side secant [1] along which :func:`go_side_root` extrapolates to the root: about
+#: twice the measured 1.1-1.35. A steeper go side is approaching a fold (the event time's
+#: square-root approach to where the event ceases; off-preset vertical drops, slopes ~16 within
+#: 0.3 % of H_c): it bends far more than :data:`GO_BEND`, and the root is bracketed instead.
+FOLD_SLOPE = 3.0
 
 
 def margin_slope(history):
@@ -127,6 +140,10 @@ def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
             go.sort()
         if go and lo is not None and lo[0] >= go[0][0]:
             return None  # not monotone at this scale: leave it to Brent
+        if go and lo is not None and _is_jump(lo, go[0]):
+            # The margin jumps at the root: no extrapolation holds; halve the bracket.
+            return guided_root(margin, 0.5 * (lo[0] + go[0][0]), None, x_tol, x_min, x_max,
+                               points=[lo, go[0]])
         if go:
             xa, ma = go[0]
             far = [p for p in go[1:] if p[0] - xa <= GO_SECANT_SPAN]
@@ -136,6 +153,11 @@ def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
                 if not secant < 0.0:
                     return None
                 root = xa - ma / secant
+                if secant < -FOLD_SLOPE:
+                    # Near a fold: the go side bends far more than GO_BEND allows; bracket.
+                    return guided_root(margin, root, None, x_tol, x_min, x_max,
+                                       spread=max(push, xa - root),
+                                       points=go + ([lo] if lo is not None else []))
                 bend = GO_BEND * (xa - root) * (xb - root)
                 if (xa - root <= 4.0 * x_tol or bend <= 0.5 * x_tol) and (
                         lo is None or root >= lo[0]):
@@ -146,7 +168,7 @@ def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
                 # Extrapolating with a slope known to slope_error misses the root by
                 # about slope_error (xa - root): one go point suffices when that is small.
                 extrapolation_error = slope_error * (xa - root)
-                if known and extrapolation_error <= 0.5 * x_tol and (
+                if known and slope >= -FOLD_SLOPE and extrapolation_error <= 0.5 * x_tol and (
                         lo is None or root >= lo[0]):
                     return root
                 uncertainty = max(push, extrapolation_error)
@@ -170,7 +192,18 @@ def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
     return None
 
 
-def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=8):
+def _is_jump(lo, hi):
+    """Whether the bracket ``lo`` = (x, m > 0), ``hi`` = (x, m <= 0) straddles a jump [bool].
+
+    A margin that is smooth through its root has |d m / d ln H| ~ 1-1.35 (t_ev ~ H^-s); one
+    whose secant across the bracket is steeper than :data:`JUMP_SLOPE` jumps there: the event
+    either comes before the heating fades or not at all (a fold of the ignition problem).
+    """
+    return (lo[1] - hi[1]) > JUMP_SLOPE * (hi[0] - lo[0])
+
+
+def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=40, *, spread=None,
+                points=()):
     """Root of the margin on ln H from a close guess ``x0``, always from a tight bracket; or None.
 
     The margin is smooth but not linear near the root (its slope changes by ~30 % within
@@ -180,41 +213,67 @@ def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=8):
     bracket it; once a bracket [a, b] with m(a) > 0 >= m(b) is at most 4 x_tol wide, the
     root is the linear interpolation inside it (error below the bracket width times the
     slope's relative change, < x_tol). The first step uses ``slope`` (d margin / d ln H from
-    a coarser search; -1, the t_ev ~ 1/H scaling, when not known). Returns None when the
-    steps leave [x_min, x_max], meet a non-finite margin, or do not converge: the caller then
-    brackets and runs Brent's method, reusing every simulation.
+    a coarser search; -1, the t_ev ~ 1/H scaling, when not known).
+
+    Where the margin jumps at the root (:func:`_is_jump`: sliding stops before rebound, or a
+    heating pulse that fades before the exit, so that the event comes before the fade or never)
+    its values say nothing about where in the bracket the root lies: the bracket is halved
+    until it is at most ``2 x_tol`` wide and its midpoint returned (error <= x_tol). One-sided
+    steps are then limited to ``spread`` [1, in ln H] (doubled after each), the uncertainty of
+    the guess, instead of following the margin's slope across the jump. ``points``: (x, m)
+    already known (e.g. a bracket found by :func:`go_side_root`).
+
+    Returns None when the steps leave [x_min, x_max], meet a non-finite margin, or do not
+    converge: the caller then brackets and runs Brent's method, reusing every simulation.
     """
     slope = slope if slope is not None and slope < 0.0 else -1.0
     push = 1.5 * x_tol
+    step = spread
     lo = hi = None  # (x, m) of the closest no-go (m > 0) and go (m <= 0) points
-    previous = None
-    x = x0
-    for _ in range(max_simulations):
-        m = _margin_inside(margin, x, x_min, x_max)
-        if m is None:
-            return None
+
+    def record(x, m):
+        nonlocal lo, hi
         if m > 0.0 and (lo is None or x > lo[0]):
             lo = (x, m)
         elif m <= 0.0 and (hi is None or x < hi[0]):
             hi = (x, m)
+
+    for x, m in points:
+        record(x, m)
+    previous = None
+    x = x0
+    for _ in range(max_simulations + 1):
         if lo is not None and hi is not None:
             if lo[0] >= hi[0]:
                 return None  # not monotone at this scale: leave it to Brent
-            root = lo[0] + lo[1] * (hi[0] - lo[0]) / (lo[1] - hi[1])
-            if hi[0] - lo[0] <= 4.0 * x_tol:
-                return root
-            # Shrink from the far end: step past the interpolated root, away from the
-            # nearer end, so that the new point lands on the far side's sign.
-            x = root - push if root - lo[0] > hi[0] - root else root + push
-        else:
-            # One-sided: secant (or the given slope) prediction, pushed past the root.
-            if previous is not None and x != previous[0]:
-                secant_slope = (m - previous[1]) / (x - previous[0])
-                if secant_slope < 0.0:
-                    slope = secant_slope
-            x_next = x - m / slope + (push if m > 0.0 else -push)
-            previous = (x, m)
-            x = x_next
+            if _is_jump(lo, hi):
+                if hi[0] - lo[0] <= 2.0 * x_tol:
+                    return 0.5 * (lo[0] + hi[0])
+                x = 0.5 * (lo[0] + hi[0])
+            else:
+                root = lo[0] + lo[1] * (hi[0] - lo[0]) / (lo[1] - hi[1])
+                if hi[0] - lo[0] <= 4.0 * x_tol:
+                    return root
+                # Shrink from the far end: step past the interpolated root, away from the
+                # nearer end, so that the new point lands on the far side's sign.
+                x = root - push if root - lo[0] > hi[0] - root else root + push
+        elif previous is not None:
+            # One-sided: the given slope's (or the secant's) prediction, pushed past the root.
+            xp, mp = previous
+            delta = -mp / slope + (push if mp > 0.0 else -push)
+            if step is not None:
+                delta = max(-step, min(step, delta))
+                step *= 2.0
+            x = xp + delta
+        m = _margin_inside(margin, x, x_min, x_max)
+        if m is None:
+            return None
+        if (lo is None or hi is None) and previous is not None and x != previous[0]:
+            secant_slope = (m - previous[1]) / (x - previous[0])
+            if secant_slope < 0.0:
+                slope = secant_slope
+        record(x, m)
+        previous = (x, m)
     return None
 
 

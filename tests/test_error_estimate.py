@@ -1,0 +1,119 @@
+"""The reported error estimate is measured per scene and bounds the error against a tight solve.
+
+``critical_height(...).error_estimate`` comes from what the search computed (its Richardson pair's
+correction, the melting width's bias bound, the root finder's tolerance); the default search
+refines its pair until that estimate meets rtol (docs/model.md, "Accuracy control"). Here it is
+checked against a tight solve over scenes across the whole input box: the report presets, the
+extremes matrix of tests/test_extremes.py, E/R = 15,000 K (compensated, as paper-series1 samples
+it, and with the report's prefactor, a self-heating billet) and off-preset scenes (quartz,
+alumina, steel and an in-between target; mu 0.04-0.3; pendulum and vertical drops, whose margin
+folds or jumps at the root). The issue's bar: the estimate bounds the error in >= 95 % of the
+scenes and never misses by more than 2x.
+
+The default run tests rtol = 1e-2 against rtol = 3e-4 (the reference's own estimate is <= 3 % of
+the tested one, so it does not blur the comparison); ``-m slow`` tests rtol = 3e-3 and 1e-3
+against rtol = 3e-5 on the same scenes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_extremes import CORNERS, H_MAX, H_MIN, ONE_AT_A_TIME, _rate_at_ref
+
+from skidmc.scene import get_preset, make_scene
+from skidmc.solver import critical_height
+
+PRESETS = ["paper-quartz", "paper-alumina-smooth", "paper-alumina-rough", "paper-gold",
+           "paper2-quartz"]
+#: Targets of the off-preset scenes (SI): quartz, an alumina grade, mild steel, in between.
+TARGETS = {
+    "quartz": {"target.conductivity": 1.69, "target.density": 2200.0,
+               "target.heat_capacity": 740.0},
+    "alumina": {"target.conductivity": 20.0, "target.density": 3700.0,
+                "target.heat_capacity": 880.0},
+    "steel": {"target.conductivity": 45.0, "target.density": 7850.0,
+              "target.heat_capacity": 475.0},
+    "between": {"target.conductivity": 6.0, "target.density": 3000.0,
+                "target.heat_capacity": 800.0},
+}
+KSI = 6.894757e6     # [Pa]
+POUND = 0.45359237   # [kg]
+
+
+def off_preset_scenes(n=8, seed=16):
+    """(label, scene): the issue's off-preset box (mu 0.04-0.3, flow stress 15-45 ksi, mass
+    5-40 lb, phi 20-70 deg), targets and pendulum/vertical in turn."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        target = list(TARGETS)[i % 4]
+        angle = float(rng.uniform(20.0, 70.0))
+        vertical = bool(i % 2)
+        overrides = {**TARGETS[target],
+                     "mu": float(math.exp(rng.uniform(math.log(0.04), math.log(0.3)))),
+                     "flow_stress": float(rng.uniform(15.0, 45.0) * KSI),
+                     "billet_mass": float(rng.uniform(5.0, 40.0) * POUND),
+                     "angle": angle, "tilt": angle if vertical else 0.0}
+        out.append((f"{target}-{'vertical' if vertical else 'pendulum'}-{i}",
+                    make_scene(preset="paper-quartz", **overrides)))
+    return out
+
+
+def scenes():
+    out = [(name, get_preset(name)) for name in PRESETS]
+    out += [(case[0], make_scene(preset=case[1], **case[2])) for case in ONE_AT_A_TIME + CORNERS]
+    out += [("Ta=15000 paper-series1", make_scene(preset="paper-quartz", **{
+        "kinetics.activation_temperature": 15000.0,
+        "kinetics.prefactor": _rate_at_ref(15000.0, 575.0)}))]
+    out += [("Ta=15000 gold", make_scene(preset="paper-gold", **{
+        "kinetics.activation_temperature": 15000.0,
+        "kinetics.prefactor": _rate_at_ref(15000.0, 575.0)}))]
+    return out + off_preset_scenes()
+
+
+SCENES = scenes()
+
+
+def _ratios(rtol, reference_rtol):
+    """|H / H_ref - 1| / error_estimate per uncensored scene; censoring must agree."""
+    ratios = {}
+    for name, scene in SCENES:
+        res = critical_height(scene, rtol=rtol, h_min=H_MIN, h_max=H_MAX)
+        ref = critical_height(scene, rtol=reference_rtol, h_min=H_MIN, h_max=H_MAX)
+        if res.censored is None:
+            # The default search refines until its estimate meets rtol, unless it reached its
+            # finest level or the melting width's measured bias alone exceeds what rtol leaves
+            # (a finer level cannot shrink it; the estimate then says so).
+            assert (res.error_estimate <= rtol * (1.0 + 1e-12) or res.level >= 4.0
+                    or res.melt_bias_estimate + 0.2 * rtol >= rtol), name
+        if res.censored or ref.censored:
+            # A censoring may differ only where the reference lies within the estimate of
+            # the bound.
+            if res.censored != ref.censored:
+                h = ref.critical_height if ref.censored is None else res.critical_height
+                bound = {"above": H_MAX, "below": H_MIN}[res.censored or ref.censored]
+                assert abs(h / bound - 1.0) <= res.error_estimate, (name, res, ref)
+            continue
+        ratios[name] = abs(res.critical_height / ref.critical_height - 1.0) / res.error_estimate
+    return ratios
+
+
+def _check(ratios):
+    # The issue's bar: bounded in >= 95 % of the scenes, never missed by more than 2x.
+    misses = {k: round(v, 2) for k, v in ratios.items() if v > 1.0}
+    assert len(ratios) >= 30
+    assert len(misses) <= 0.05 * len(ratios), misses
+    assert max(ratios.values()) <= 2.0, misses
+
+
+def test_error_estimate_bounds_the_error_across_the_box():
+    _check(_ratios(1e-2, 3e-4))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rtol", [3e-3, 1e-3])
+def test_error_estimate_bounds_the_error_at_tight_rtol(rtol):
+    _check(_ratios(rtol, 3e-5))
