@@ -114,6 +114,8 @@ def test_sobol_on_a_saltelli_ensemble_ranks_the_inputs():
                     coords={"scene": ["s"]},
                     attrs={"design_method": "saltelli", "design_keys": keys,
                            "saltelli_second_order": 0, "solver_h_max": 1e4})
+    # Curves and fits of a saltelli design use its base rows only: N of the N (d + 2) rows.
+    assert scene_outcomes(ds, "s")["n"] == 256
     res = ensemble_sobol(ds, "s", resamples=200)
     st = dict(zip(keys, res["ST"].values))
     assert st["mu"] > st["flow_stress"] > st["angle"]

@@ -87,12 +87,19 @@ def scene_outcomes(ds: xr.Dataset, scene: str) -> dict:
     -------
     dict
         ``heights_m`` [m] (finished, not failed samples, flattened over the sample dims, bounds
-        for censored samples), ``censored`` ("", "above", "below"), and the counts ``n``,
-        ``n_failed``, ``n_unfinished``, ``n_above``, ``n_below``.
+        for censored samples; of a ``saltelli`` design only the base rows), ``censored`` ("",
+        "above", "below"), and the counts ``n``, ``n_failed``, ``n_unfinished``, ``n_above``,
+        ``n_below``.
     """
     sub = _select(ds, scene)
     height = np.asarray(sub["critical_height"].values, dtype=float).reshape(-1)
     status = np.asarray(sub["status"].values).astype(str).reshape(-1)
+    if ds.attrs.get("design_method") == "saltelli":
+        # Only the base rows (matrix A of Saltelli's design: a scrambled Sobol' sample of the
+        # inputs) enter curves and fits; the other rows of a block share all but one input with
+        # them, and would make the intervals look far tighter than the information they hold.
+        step = _saltelli_block(ds)
+        height, status = height[::step], status[::step]
     unfinished = status == ""
     failed = status == "failed"
     keep = ~unfinished & ~failed
@@ -131,6 +138,8 @@ class SceneAnalysis:
         against them (None where there are no drops).
     sobol : xarray.Dataset or None
         Sobol' indices of ln H_c (``saltelli`` designs).
+    sobol_convergence : xarray.Dataset or None
+        The same against N (200 bootstrap resamples per N).
     """
 
     scene: str
@@ -143,6 +152,7 @@ class SceneAnalysis:
     updown: object | None = None
     scores: object | None = None
     sobol: xr.Dataset | None = None
+    sobol_convergence: xr.Dataset | None = None
     notes: list = field(default_factory=list)
 
     def predicted_h50(self) -> tuple[float, float, float]:
@@ -270,7 +280,15 @@ def analyse_scene(ds: xr.Dataset, scene: str, *, experiment: str | None = None,
     design = ds.attrs.get("design_method", "")
     if (sobol if sobol is not None else design == "saltelli") and design == "saltelli":
         analysis.sobol = ensemble_sobol(ds, scene, confidence=confidence)
+        analysis.sobol_convergence = ensemble_sobol(ds, scene, confidence=confidence,
+                                                    resamples=200, convergence=True)
     return analysis
+
+
+def _saltelli_block(ds: xr.Dataset) -> int:
+    """Rows per base row of a saltelli design: d + 2, or 2 d + 2 with second order."""
+    d = len(_design_keys(ds))
+    return 2 * d + 2 if bool(ds.attrs.get("saltelli_second_order", 0)) else d + 2
 
 
 def _design_keys(ds: xr.Dataset) -> list[str]:
@@ -281,7 +299,8 @@ def _design_keys(ds: xr.Dataset) -> list[str]:
 
 
 def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
-                   resamples: int = 1000, seed: int = 0, policy: str = "cap+drop") -> xr.Dataset:
+                   resamples: int = 1000, seed: int = 0, policy: str = "cap+drop",
+                   convergence: bool = False) -> xr.Dataset:
     """Sobol' indices of ln H_c of one scene of a ``saltelli`` ensemble.
 
     The design columns are the study's uncertain keys (uniform on [0, 1), mapped to each scene's
@@ -299,6 +318,9 @@ def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
         Censored and failed samples (:func:`~skidmc.analysis.sensitivity.prepare_output`): by
         default ln min(H, h_max) for censored samples and the whole linked block of a failed
         sample dropped; the shares affected are in the result's attributes.
+    convergence : bool
+        Return the indices against N instead (the first n base rows, n = 16, 32, ..., N:
+        :func:`~skidmc.analysis.sensitivity.sobol_convergence`).
 
     Returns
     -------
@@ -322,6 +344,11 @@ def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
     prepared = prepare_output(sub["critical_height"].values.reshape(-1), status, policy=policy,
                               h_max=float(ds.attrs["solver_h_max"]), problem=problem,
                               second_order=second)
+    if convergence:
+        from skidmc.analysis.sensitivity import sobol_convergence
+
+        return sobol_convergence(problem, prepared.output, second_order=second,
+                                 confidence=confidence, resamples=resamples, seed=seed)
     res = sobol_indices(problem, prepared.output, second_order=second, confidence=confidence,
                         resamples=resamples, seed=seed)
     res.attrs.update(output="ln critical_height [ln m]", policy=str(policy),
@@ -632,6 +659,19 @@ def _figures(out: Path, analyses: list[SceneAnalysis]) -> list[Path]:
         fig.savefig(path, dpi=120)
         plt.close(fig)
         written.append(path)
+        if a.sobol_convergence is not None and a.sobol_convergence.sizes["N"] > 1:
+            from skidmc.analysis.sensitivity import plot_convergence
+
+            fig, axes = plt.subplots(1, 2, figsize=(11.0, 4.0), sharey=True)
+            for ax, index in zip(axes, ("S1", "ST")):
+                plot_convergence(ax, a.sobol_convergence, index=index)
+                ax.set_title(f"{a.scene}: {index} against N")
+            axes[1].legend(fontsize=6, loc="best")
+            fig.tight_layout()
+            path = out / f"sobol_convergence_{a.scene}.png"
+            fig.savefig(path, dpi=120)
+            plt.close(fig)
+            written.append(path)
     return written
 
 
