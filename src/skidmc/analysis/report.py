@@ -179,10 +179,14 @@ class SceneAnalysis:
 
 
 def _grid_ft(heights_ft: np.ndarray, extra=()) -> np.ndarray:
+    """Heights [ft] at which curves are evaluated: 241 log-spaced points over the samples' span
+    (a step function between sample heights reads the same on them at figure resolution) and
+    the experiments' drop heights, so that the curves are known where the drops were made."""
     finite = heights_ft[np.isfinite(heights_ft) & (heights_ft > 0)]
-    values = np.concatenate([finite, np.asarray(extra, dtype=float)])
+    extra = np.asarray(extra, dtype=float)
+    values = np.concatenate([finite, extra])
     lo, hi = values.min() / 1.5, values.max() * 1.5
-    return np.unique(np.concatenate([np.geomspace(lo, hi, 241), values]))
+    return np.unique(np.concatenate([np.geomspace(lo, hi, 241), extra]))
 
 
 def _epistemic_family(sub: xr.Dataset, grid_ft: np.ndarray) -> xr.Dataset:
