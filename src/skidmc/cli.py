@@ -478,7 +478,9 @@ def _cmd_report(args: argparse.Namespace) -> int:
             print(f"{a.scene}: too few exact critical heights for a fit")
             continue
         est, low, high = a.predicted_h50()
-        line = (f"{a.scene}: H50 {est:.3g} ft [{low:.3g}, {high:.3g}], sigma ln H "
+        band = ("epistemic 5-95 %" if a.epistemic is not None
+                else f"{args.confidence:.0%} interval")
+        line = (f"{a.scene}: H50 {est:.3g} ft ({band} {low:.3g} to {high:.3g}), sigma ln H "
                 f"{a.fit.sigma:.2f}; {a.fit.verdict}")
         if a.experiment is not None:
             e = a.experimental_h50()

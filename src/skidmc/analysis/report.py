@@ -156,7 +156,15 @@ class SceneAnalysis:
     notes: list = field(default_factory=list)
 
     def predicted_h50(self) -> tuple[float, float, float]:
-        """(estimate, low, high) of the predicted H50 [ft] (the fit's profile interval)."""
+        """(estimate, low, high) of the predicted H50 [ft].
+
+        With epistemic draws: the median of the per-draw H50 and its :data:`EPISTEMIC_BAND`
+        across draws (what is not known about the fixed inputs); otherwise the log-normal fit's
+        H50 and its profile-likelihood interval (sampling error only)."""
+        if self.epistemic is not None:
+            h50 = self.epistemic["h50"].values
+            low, high = (float(np.nanquantile(h50, q)) for q in EPISTEMIC_BAND)
+            return (float(np.nanmedian(h50)), low, high)
         if self.fit is None:
             return (math.nan, math.nan, math.nan)
         return tuple(float(v) for v in self.fit.intervals["h50"])
@@ -528,7 +536,13 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str
                 f"{0 if exp.drops is None else len(exp.drops)} | "
                 f"{_fmt(s.log_likelihood) if s else '-'} | {_fmt(s.brier) if s else '-'} | "
                 f"{_fmt(s.log_score) if s else '-'} |")
-        lines += ["", "Experimental intervals: probit maximum likelihood on ln H of the drops with "
+        predicted = ("the median of the per-epistemic-draw H50 with its 5-95 % band across "
+                     "epistemic draws (what is not known about kinetics and properties), not the "
+                     "pooled fit's far narrower sampling interval." if "epistemic" in ds.dims
+                     else "the log-normal fit with its profile-likelihood interval (sampling "
+                     "error of the ensemble only).")
+        lines += ["", "Predicted H50: " + predicted,
+                  "", "Experimental intervals: probit maximum likelihood on ln H of the drops with "
                   "a profile-likelihood interval; where the go and no-go heights do not overlap "
                   "the maximum does not exist: the likelihood-ratio bounds are given around the "
                   "report's value. Scores use the fitted log-normal P(go | H) of the ensemble."]
@@ -588,7 +602,8 @@ def _figures(out: Path, analyses: list[SceneAnalysis]) -> list[Path]:
                             alpha=0.25, label="5-95 % across epistemic draws")
             ax.plot(h, fam["p_go_median"].values, color="C1", lw=2, label="median")
         plot_go_curve(ax, a.curve, drops=a.experiment.drops if a.experiment else None,
-                      label="pooled" if a.epistemic is not None else "ensemble")
+                      label="pooled (mixes unknown and variable)" if a.epistemic is not None
+                      else "ensemble")
         if a.fit is not None:
             h = a.curve["height"].values
             ax.plot(h, a.fit.probability(h), "--", color="C3", label="log-normal fit")
