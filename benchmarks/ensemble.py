@@ -34,9 +34,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from skidmc.ensemble.executors import default_workers
-from skidmc.ensemble.run import execute_study
-from skidmc.ensemble.study import load_study
+from skidmc.ensemble.executors import default_workers  # noqa: E402 (after the sys.path set-up)
+from skidmc.ensemble.run import execute_study  # noqa: E402 (after the sys.path set-up)
+from skidmc.ensemble.study import load_study  # noqa: E402 (after the sys.path set-up)
 
 OUT = ROOT / "results" / "benchmarks"
 

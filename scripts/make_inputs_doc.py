@@ -23,9 +23,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from skidmc.scene.keys import INPUT_KEYS, SI_UNITS, format_number
-from skidmc.scene.materials import MATERIALS, TARGET_KEYS
-from skidmc.scene.units import to_si
+from skidmc.scene.keys import INPUT_KEYS, SI_UNITS, format_number  # noqa: E402 (after the sys.path set-up)
+from skidmc.scene.materials import MATERIALS, TARGET_KEYS  # noqa: E402 (after the sys.path set-up)
+from skidmc.scene.units import to_si  # noqa: E402 (after the sys.path set-up)
 
 __all__ = ["BLOCKS", "DOC", "main", "render"]
 
@@ -50,7 +50,8 @@ def _interval(ik) -> str:
 
 def keys_table() -> str:
     """The table of the 19 scene keys."""
-    rows = ["| key | SI unit | allowed | plausible bare number | symbol | meaning | in the report |",
+    rows = ["| key | SI unit | allowed | plausible bare number | symbol | meaning "
+            "| in the report |",
             "|---|---|---|---|---|---|---|"]
     for ik in INPUT_KEYS:
         plausible = ("-" if ik.plausible is None

@@ -90,7 +90,8 @@ def main():
     ]
     for case, label, h in rows:
         r = h / report
-        lines.append(f"| {case} | {label} | " + " | ".join(f"{v:.3f} ({x:.2f})" for v, x in zip(h, r))
+        cells = " | ".join(f"{v:.3f} ({x:.2f})" for v, x in zip(h, r))
+        lines.append(f"| {case} | {label} | " + cells
                      + f" | {math.sqrt(np.mean(np.log(r) ** 2)):.3f} | {r.max() - r.min():.3f} |")
     lines += ["", "Values in parentheses: ratio to the report's calculated height."]
     (OUT / "second_series.md").write_text("\n".join(lines) + "\n")

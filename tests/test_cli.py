@@ -354,7 +354,7 @@ def test_run_unreachable_scheduler_gives_up_quickly(tmp_path, tiny, cli_runs, ca
     assert "Traceback" not in err and not out.exists() and not list(tmp_path.glob("s.h5*"))
 
 
-# --- skidmc report ---------------------------------------------------------------------------------
+# --- skidmc report --------------------------------------------------------------------------------
 
 
 def test_report_of_a_result_file(tmp_path, study_file, capsys):

@@ -67,7 +67,7 @@ def test_probit_matches_statsmodels_glm():
 
 
 def _independent_profile(heights, went, q_log, z):
-    """max over sigma of the binomial log-likelihood with quantile fixed, written with scipy.stats."""
+    """max over sigma of the binomial log-likelihood with the quantile fixed (scipy.stats)."""
     x = np.log(heights)
 
     def negative(log_sigma):

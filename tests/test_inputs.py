@@ -76,7 +76,7 @@ def test_fast_tier_fields_are_the_kernels_arguments():
     assert len(SCENE_FIELDS) == len(NUMERIC_KEYS)
 
 
-# --- the checks between keys, once for scalars and arrays ------------------------------------------
+# --- the checks between keys, once for scalars and arrays -----------------------------------------
 
 _EDGE = [0.0, 1e-300, 30.0, 45.0, 45.0 * (1 + 1e-12), 45.0 * (1 + 1e-6), 89.9, 553.0, 600.0,
          math.nan, math.inf, -math.inf]

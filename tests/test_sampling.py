@@ -97,7 +97,7 @@ def test_seeds_and_streams_differ():
     assert np.array_equal(again, draws[0])
 
 
-# --- designs ---------------------------------------------------------------------------------------
+# --- designs --------------------------------------------------------------------------------------
 
 
 @pytest.mark.parametrize("method,n", [("mc", 2 * MC_BLOCK + 37), ("lhs", 300), ("sobol", 256),
@@ -142,7 +142,7 @@ def test_saltelli_matches_salib_problem_and_row_count():
     assert problem["names"] == list(study.keys) and problem["num_vars"] == d
 
 
-# --- inputs ----------------------------------------------------------------------------------------
+# --- inputs ---------------------------------------------------------------------------------------
 
 
 def test_batch_composition_does_not_change_a_sample():
@@ -179,7 +179,7 @@ def test_rank_correlation_of_the_copula():
 
 def test_prefactor_follows_the_rate_at_reference():
     study = _study("mc", n=500)
-    for sc, values in zip(study.scenes, StudySampler(study).draw(0, 500)):
+    for values in StudySampler(study).draw(0, 500):
         z = values[RATE_AT_REFERENCE] * np.exp(values["kinetics.activation_temperature"] / 575.0)
         assert np.array_equal(values["kinetics.prefactor"], z)
         # The compensation effect: ln Z rises with E/R (rate at T_ref independent of E/R).

@@ -134,7 +134,7 @@ def test_study_error_pickles_and_is_a_value_error():
     assert str(err) == "f.toml: design.n = 0: expected an integer >= 1"
 
 
-# --- what a valid study means ----------------------------------------------------------------------
+# --- what a valid study means ---------------------------------------------------------------------
 
 
 def test_units_convert_levels_and_spreads():

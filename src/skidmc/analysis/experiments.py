@@ -256,7 +256,8 @@ def measured_friction() -> xr.Dataset:
     low5 = [float(f.split("-")[0]) if f else math.nan for f in table5["finish_uin"]]
     high5 = [float(f.split("-")[1]) if f else math.nan for f in table5["finish_uin"]]
     low1, high1 = _floats(table1["roughness_low_uin"]), _floats(table1["roughness_high_uin"])
-    finish1 = [f"{lo:g}-{hi:g}" if math.isfinite(hi) else f"> {lo:g}" for lo, hi in zip(low1, high1)]
+    finish1 = [f"{lo:g}-{hi:g}" if math.isfinite(hi) else f"> {lo:g}"
+               for lo, hi in zip(low1, high1)]
     surfaces = [f"{t}_{f.replace('-', '_')}" if f else t
                 for t, f in zip(table5["target"], table5["finish_uin"])]
     surfaces += [f"quartz_series2_{i + 1}" for i in range(n1)]

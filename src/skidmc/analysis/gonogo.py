@@ -1241,7 +1241,8 @@ def score_drops(prob_go: Callable, heights, went) -> DropScores:
     if bad.any():
         index = int(np.flatnonzero(bad)[0])
         raise _bad("prob_go", prob_go,
-                   f"returned {float(p_go[index])!r} at height {heights[index]:g}; must be in [0, 1]")
+                   f"returned {float(p_go[index])!r} at height {heights[index]:g}; "
+                   "must be in [0, 1]")
     p_outcome = np.where(went, p_go, 1.0 - p_go)
     with np.errstate(divide="ignore"):
         log_p = np.log(p_outcome)

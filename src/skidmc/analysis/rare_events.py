@@ -3,7 +3,8 @@
 Every method works in the standard normal space U of the inputs: a row u of independent standard
 normals becomes the physical inputs x through the Gaussian copula of
 :class:`GaussianCopulaTransform` (correlated normal scores z = L u with L the Cholesky factor of
-the copula correlation, then each marginal's quantile at Phi(z)). The limit state g is called on whole batches of rows, because in
+the copula correlation, then each marginal's quantile at Phi(z)). The limit state g is called
+on whole batches of rows, because in
 skidmc it is an expensive batched solver: the number of rows passed to g is the cost that every
 result reports (:attr:`RareEventResult.evaluations`).
 

@@ -211,8 +211,8 @@ def _indices_from_means(m: np.ndarray, layout: _Layout) -> np.ndarray:
             j, k = layout.pairs
             m_ba = m[..., 6 + 3 * g:6 + 4 * g]
             m_ba_ab = m[..., 6 + 4 * g:]
-            v_jk = (m_ba_ab - mab[..., None] - centre[..., None]
-                    * (m_ba[..., j] + m_ab[..., k] - ma[..., None] - mb[..., None])) / var[..., None]
+            cross = m_ba[..., j] + m_ab[..., k] - ma[..., None] - mb[..., None]
+            v_jk = (m_ba_ab - mab[..., None] - centre[..., None] * cross) / var[..., None]
             out.append(v_jk - s1[..., j] - s1[..., k])
     return np.concatenate(out, axis=-1)
 

@@ -292,8 +292,9 @@ def transform(study: Study, u: np.ndarray) -> list[dict[str, np.ndarray]]:
     -------
     list of dict
         One dict per scene (``study.scenes`` order): key -> values, shape (m,), in SI units, for
-        every uncertain key of the scene; with :data:`~skidmc.ensemble.study.RATE_AT_REFERENCE` also the
-        derived ``kinetics.prefactor`` [1/s].
+        every uncertain key of the scene; with
+        :data:`~skidmc.ensemble.study.RATE_AT_REFERENCE` also the derived
+        ``kinetics.prefactor`` [1/s].
     """
     u = np.atleast_2d(np.asarray(u, dtype=float))
     if u.shape[1] != len(study.keys):

@@ -660,7 +660,7 @@ class _Parser:
             if n_max < n:
                 raise self.error("design.n_max", n_max, f"must be >= design.n ({n})")
             growth["n_max"] = int(n_max)
-        for name, default in (("stable_threshold", 0.1), ("stable_half_width", 0.05)):
+        for name in ("stable_threshold", "stable_half_width"):
             if name in table:
                 value = table[name]
                 if "n_max" not in table:

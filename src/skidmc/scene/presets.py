@@ -8,7 +8,8 @@ report's. The targets' Table VI values are entries of :mod:`skidmc.scene.materia
 
 Each entry of :data:`PRESETS` is ``{"source": str, "notes": str, "values": {key: str}}`` with
 the values as unit strings (``"28000 psi"``), so that ``skidmc presets`` shows what the report
-printed; :func:`skidmc.scene.get_preset` converts and validates them into a :class:`~skidmc.scene.Scene`.
+printed; :func:`skidmc.scene.get_preset` converts and validates them into a
+:class:`~skidmc.scene.Scene`.
 
 Notes on the report's units: its "cal" is the thermochemical calorie (4.184 J, pint's ``cal``);
 "cal/g-°C" and "cal/sec-cm-°C" are per kelvin. The nomenclature lists k in cal/sec-cm-°R, but

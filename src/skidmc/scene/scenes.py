@@ -3,8 +3,8 @@
 A scene is the 19 flat keys of ``docs/architecture.md`` held as SI floats (angles in degrees)
 plus the configuration string, in a frozen :class:`Scene`. Build one with :func:`make_scene`,
 which starts from a preset or from nothing, applies overrides given as SI floats or unit strings
-(``"28000 psi"``), converts them (:func:`skidmc.scene.units.to_si`) and validates them. Every rejected
-input raises :class:`skidmc.errors.SceneError` naming the key and the value as given.
+(``"28000 psi"``), converts them (:func:`skidmc.scene.units.to_si`) and validates them. Every
+rejected input raises :class:`skidmc.errors.SceneError` naming the key and the value as given.
 
 The billet tilt psi follows the configuration unless it is given explicitly (report Sec. II.C,
 "psi = phi for vertical drops when the flat surface of the hemisphere is horizontal at impact"):
