@@ -35,11 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from skidmc.solver import fast
-from skidmc.scene import get_preset
 from skidmc.ensemble.sampling import StudySampler
-from skidmc.solver import critical_height
 from skidmc.ensemble.study import RATE_AT_REFERENCE, load_study
+from skidmc.scene import get_preset
+from skidmc.solver import critical_height, fast
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "benchmarks"

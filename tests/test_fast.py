@@ -1,5 +1,7 @@
-"""The fast tier (skidmc.physics.fast kernels, skidmc.solver.fast): Duhamel integral, agreement with the full model, trends,
-censoring and robustness at the extremes of the input ranges."""
+"""The fast tier (skidmc.physics.fast kernels, skidmc.solver.fast).
+
+Duhamel integral, agreement with the full model, trends, censoring and robustness at the extremes
+of the input ranges."""
 
 import math
 

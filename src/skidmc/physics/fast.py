@@ -30,7 +30,8 @@ Model (report equation numbers in parentheses)
    sqrt(alpha1 t))), this depression is a universal function of r = (T_m - T0) / (T_s - T0):
 
        dT_melt = lambda_melt * (L / c1) * share * G(r),
-       G(r) = (2/sqrt(pi)) int_{r^2}^1 d/dsigma[sqrt(sigma) eta(sqrt(r^2/sigma))] / sqrt(1 - sigma) dsigma,
+       G(r) = (2/sqrt(pi)) int_{r^2}^1 d/dsigma[sqrt(sigma) eta(sqrt(r^2/sigma))]
+              / sqrt(1 - sigma) dsigma,
 
    eta(r) the root of sqrt(pi) ierfc(eta) = r (G(1) = 0, G grows as r falls). G is tabulated
    once at import (:data:`MELT_TABLE`) and interpolated; the effective surface temperature
@@ -38,11 +39,13 @@ Model (report equation numbers in parentheses)
    the inert (un-melted) profile sets the melt depth (it overestimates s; lambda_melt absorbs
    this), the melt front is treated as at the interface, and the constant-flux similarity is
    used at each time with the local r. Melting is modelled only when the full model would
-   (heat of fusion > 0 and T_m below the runaway temperature, :func:`skidmc.solver.model.build_model`).
+   (heat of fusion > 0 and T_m below the runaway temperature,
+   :func:`skidmc.solver.model.build_model`).
 4. Ignition criterion: the adiabatic (Frank-Kamenetskii) induction integral of the surface
    history,
 
-       J(H) = int_0^t_exit dtau / tau_ad(T_s,eff(tau)),  tau_ad(T) = T^2 / (T_a dT_ad Z exp(-T_a/T)),
+       J(H) = int_0^t_exit dtau / tau_ad(T_s,eff(tau)),
+       tau_ad(T) = T^2 / (T_a dT_ad Z exp(-T_a/T)),
 
    dT_ad = Q / c1, must reach a threshold set by heat losses from the thin reacting layer:
 
@@ -365,7 +368,8 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
     for k in range(n_times):
         times[k] = t_exit * (k + 1.0) / n_times
     theta = np.empty(n_times)
-    duhamel_theta(mu * flow_stress * math.sqrt(2.0 * STANDARD_GRAVITY), s, c, omega, t_exit, e1 + e2,
+    duhamel_theta(mu * flow_stress * math.sqrt(2.0 * STANDARD_GRAVITY), s, c, omega, t_exit,
+                  e1 + e2,
                   times, gl_x, gl_w, theta)
     th_max = 0.0
     for k in range(n_times):

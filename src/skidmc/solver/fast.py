@@ -205,5 +205,8 @@ def _check_columns(arrays):
 
 
 def scene_columns(scenes):
-    """Columns of :data:`SCENE_FIELDS` from a sequence of scenes (for :func:`fast_critical_heights`)."""
+    """Columns of :data:`SCENE_FIELDS` from a sequence of scenes.
+
+    For :func:`fast_critical_heights`.
+    """
     return {f: np.array([float(getattr(s, f)) for s in scenes]) for f in SCENE_FIELDS}
