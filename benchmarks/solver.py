@@ -369,7 +369,7 @@ def compare(trees, rtols, rounds, repeats):
 
     Rounds alternate the trees (this one first, then each other, then again...), each in a
     fresh one-core process, so that the machine's load hits all alike. Writes
-    ``results/benchmarks/solver_compare.md``: per rtol and scene set, the median over scenes of
+    ``results/benchmarks/solver.compare.md``: per rtol and scene set, the median over scenes of
     (old time / new time) with the range of the per-round medians, and the simulations.
     """
     import json
@@ -424,7 +424,7 @@ def compare(trees, rtols, rounds, repeats):
                 lines.append(f"| {rtol:g} | {label_set} | {label} | {1e3 * t_med:.2f} ms | "
                              f"{ratio} | {sims['rebound']} | {sims['stops_sliding']} |")
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "solver_compare.md").write_text("\n".join(lines) + "\n")
+    (OUT / "solver.compare.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
 
