@@ -305,6 +305,8 @@ def report(rows, presets):
         if ts and tp:
             lines.append(f"- at {error:.0e} median error: skidmc {1e3 * ts:.3g} ms, peer "
                          f"{tp:.3g} s: **{tp / ts:.0f}x** faster (target >= 1000x).")
+        elif not peer_front:
+            lines.append(f"- at {error:.0e} median error: the peer was not run (--no-peer).")
         else:
             lines.append(f"- at {error:.0e} median error: "
                          + ("the peer did not reach this error at the settings run."
