@@ -262,9 +262,10 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
                 res.melt_bias_estimate + ROOT_SHARE * rtol < rtol
                 or (narrowed < 2 and common["melt_width"] > melt_width_floor(fine.level)
                     * (1.0 + 1e-9))):
-            # Refine (also where only a finer level's floor lets the width narrow further): the next level's root is predicted from this pair (its error is a
-            # quarter of the fine level's, which is about the correction), and the pair moves
-            # up a level. Its correction should shrink 4x; half is assumed.
+            # Refine (also where only a finer level's floor lets the width narrow further):
+            # the next level's root is predicted from this pair (its error is a quarter of
+            # the fine level's, which is about the correction), and the pair moves up a
+            # level. Its correction should shrink 4x; half is assumed.
             correction = res.richardson_correction
             room = (rtol - res.melt_bias_estimate
                     - a_posteriori_error(0.5 * correction, fine.level))
