@@ -23,9 +23,16 @@ median error-cost front, measured side by side in this run) and the Pareto figur
 
 Usage::
 
-    python benchmarks/solver.py            # all presets, ~4-25 min by the machine (the peer dominates)
+    python benchmarks/solver.py            # all presets, ~4-25 min (the peer dominates)
     python benchmarks/solver.py --quick    # two presets, fewer tolerances
     python benchmarks/solver.py --no-peer  # skidmc only (the peer's rows are left out)
+    python benchmarks/solver.py --compare OLD_SRC [OLD_SRC ...] --rounds 3
+        # side by side: this tree against other source trees (e.g. `git archive REV src | tar -x
+        # -C /tmp/rev`), same scenes, rounds alternated in fresh processes, one core each;
+        # per rtol and scene set the median of the per-scene time ratios and their spread
+
+On a shared machine, compare speeds only side by side (``--compare``): absolute times move with
+the load, ratios measured in alternated rounds much less.
 """
 
 from __future__ import annotations
@@ -45,13 +52,11 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import peer  # noqa: E402
-
 import numpy as np  # noqa: E402
+import peer  # noqa: E402
 
 from skidmc.scene import get_preset, make_scene  # noqa: E402
 from skidmc.solver import FT, critical_height  # noqa: E402
@@ -280,8 +285,9 @@ def report(rows, presets):
     lines += ["", "## Headline figures", ""]
     if at_1e3:
         lines.append(
-            f"- skidmc at rtol = 1e-3: median {1e3 * statistics.median(r['time_s'] for r in at_1e3):.1f}"
-            f" ms per critical height, median error "
+            "- skidmc at rtol = 1e-3: median "
+            f"{1e3 * statistics.median(r['time_s'] for r in at_1e3):.1f} ms per critical height, "
+            "median error "
             f"{statistics.median(r['rel_error'] for r in at_1e3):.1e}, worst "
             f"{max(r['rel_error'] for r in at_1e3):.1e} over the presets and off-preset scenes "
             "(issue 16's target: median <= 2 ms, worst error <= 1e-3).")
@@ -292,18 +298,21 @@ def report(rows, presets):
         worst = max(r["rel_error"] for r in rows
                     if r["method"] == "skidmc full" and r["setting"] == setting)
         lines.append(f"- cheapest setting measured with median error <= 1e-3: {setting}, median "
-                     f"{1e3 * t:.3g} ms per critical height, median error {e:.1e}, worst {worst:.1e}.")
+                     f"{1e3 * t:.3g} ms per critical height, median error {e:.1e}, "
+                     f"worst {worst:.1e}.")
     for error in (1e-2, 3e-3, 1e-3):
         ts, tp = _cost_at_error(full, error), _cost_at_error(peer_front, error)
         if ts and tp:
             lines.append(f"- at {error:.0e} median error: skidmc {1e3 * ts:.3g} ms, peer "
                          f"{tp:.3g} s: **{tp / ts:.0f}x** faster (target >= 1000x).")
+        elif not peer_front:
+            lines.append(f"- at {error:.0e} median error: the peer was not run (--no-peer).")
         else:
             lines.append(f"- at {error:.0e} median error: "
                          + ("the peer did not reach this error at the settings run."
                             if ts else "skidmc did not reach this error at the settings run."))
     if fast:
-        for setting, e, t in fast:
+        for _setting, e, t in fast:
             lines.append(f"- fast tier: median error {e:.1e} against the full model, "
                          f"{1e6 * t:.1f} us per height.")
     lines += _summary(rows)
@@ -340,12 +349,103 @@ def report(rows, presets):
     fig.savefig(OUT / "solver.png", dpi=150)
 
 
+def _compare_worker(rtols, repeats):
+    """One round in this process: per rtol and scene, (median time [s], simulations, height)."""
+    import json
+
+    critical_height(get_preset("paper-quartz"), rtol=1e-2)  # compile (or load) the kernels
+    scenes = [(name, get_preset(name), "preset") for name in PRESETS]
+    scenes += [(name, scene, "off-preset") for name, scene in off_preset_scenes()]
+    out = []
+    for rtol in rtols:
+        for name, scene, kind in scenes:
+            res, t = _time_skidmc(scene, repeats, rtol=rtol)
+            out.append(dict(rtol=rtol, scene=name, kind=kind, time_s=t,
+                            evaluations=res.evaluations, height_m=res.critical_height,
+                            error_estimate=res.error_estimate, exit_kind=res.exit_kind))
+    print("JSON" + json.dumps(out))
+
+
+def compare(trees, rtols, rounds, repeats):
+    """Side-by-side timing of this tree against ``trees`` (paths holding ``src/skidmc``).
+
+    Rounds alternate the trees (this one first, then each other, then again...), each in a
+    fresh one-core process, so that the machine's load hits all alike. Writes
+    ``results/benchmarks/solver.compare.md``: per rtol and scene set, the median over scenes of
+    (old time / new time) with the range of the per-round medians, and the simulations.
+    """
+    import json
+    import subprocess
+
+    labels = ["this tree"] + [str(t) for t in trees]
+    paths = [ROOT / "src"] + [Path(t) / "src" for t in trees]
+    runs = {label: [] for label in labels}
+    for rnd in range(rounds):
+        order = list(zip(labels, paths))
+        if rnd % 2:
+            order.reverse()
+        for label, path in order:
+            env = dict(os.environ, PYTHONPATH=str(path))
+            cmd = [sys.executable, __file__, "--worker", *map(str, rtols),
+                   "--repeats", str(repeats)]
+            text = subprocess.run(cmd, env=env, capture_output=True, text=True,
+                                  check=True).stdout
+            runs[label].append(json.loads(text.split("JSON", 1)[1]))
+            print(f"round {rnd + 1}: {label} done", flush=True)
+    lines = ["# Solver speed side by side (benchmarks/solver.py --compare)", "",
+             f"Machine: {os.cpu_count()} CPUs, shared; {rounds} alternated rounds, each a fresh "
+             f"one-core process per tree, median of {repeats} calls per scene. *ratio*: old time "
+             "/ new time per scene (> 1: this tree is faster), median over the scenes of the "
+             "set, then median [min-max] over rounds. Times: median over scenes and rounds.",
+             "", "| rtol | scenes | tree | median time | ratio old/new | sims rebound "
+             "| sims stops sliding |", "|---|---|---|---|---|---|---|"]
+    new = runs[labels[0]]
+    for rtol in rtols:
+        for label_set, sel in (("presets", "preset"), ("off-preset", "off-preset"),
+                               ("all", None)):
+            def pick(rows, rtol=rtol, sel=sel):
+                return [r for r in rows if r["rtol"] == rtol and (sel is None
+                                                                 or r["kind"] == sel)]
+            for label in labels:
+                per_round = [pick(rows) for rows in runs[label]]
+                t_med = statistics.median(r["time_s"] for rows in per_round for r in rows)
+                sims = {}
+                for kind in ("rebound", "stops_sliding"):
+                    ev = sorted(r["evaluations"] for r in per_round[0] if r["exit_kind"] == kind)
+                    sims[kind] = f"{statistics.median(ev):g} ({ev[0]}-{ev[-1]})" if ev else "-"
+                if label == labels[0]:
+                    ratio = "1"
+                else:
+                    meds = []
+                    for old_rows, new_rows in zip(per_round, (pick(rows) for rows in new)):
+                        t_new = {r["scene"]: r["time_s"] for r in new_rows}
+                        meds.append(statistics.median(r["time_s"] / t_new[r["scene"]]
+                                                      for r in old_rows))
+                    ratio = (f"{statistics.median(meds):.2f} [{min(meds):.2f}-"
+                             f"{max(meds):.2f}]")
+                lines.append(f"| {rtol:g} | {label_set} | {label} | {1e3 * t_med:.2f} ms | "
+                             f"{ratio} | {sims['rebound']} | {sims['stops_sliding']} |")
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "solver.compare.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="two presets, fewer settings")
     p.add_argument("--repeats", type=int, default=3, help="timed repeats per skidmc setting")
     p.add_argument("--no-peer", action="store_true", help="leave the scipy peer out")
+    p.add_argument("--compare", nargs="+", metavar="TREE",
+                   help="time this tree against these source trees side by side")
+    p.add_argument("--rounds", type=int, default=3, help="alternated rounds of --compare")
+    p.add_argument("--worker", nargs="+", type=float, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
+    if a.worker:
+        _compare_worker(a.worker, a.repeats)
+        return
+    if a.compare:
+        compare(a.compare, SUMMARY_RTOLS, a.rounds, a.repeats)
+        return
     presets, rtols, peers = PRESETS, SKIDMC_RTOLS, PEER_SETTINGS
     off = off_preset_scenes()
     if a.quick:

@@ -35,11 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
-from skidmc.solver import fast
-from skidmc.scene import get_preset
 from skidmc.ensemble.sampling import StudySampler
-from skidmc.solver import critical_height
 from skidmc.ensemble.study import RATE_AT_REFERENCE, load_study
+from skidmc.physics.fast import ERROR_ESTIMATE, ERROR_SELF_HEATING, ERROR_STOPS_SLIDING
+from skidmc.scene import get_preset
+from skidmc.solver import critical_height, fast
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "benchmarks"
@@ -118,12 +118,41 @@ def full_heights(scenes):
     return np.array(h), np.array(cens, dtype=object), np.array(wall)
 
 
-def fast_heights(scenes, **kw):
+def fast_heights(scenes, with_error=False, **kw):
     cols = fast.scene_columns([s for _, s in scenes])
     res = fast.fast_critical_heights(**cols, **kw)
     names = {fast.CENSOR_NONE: None, fast.CENSOR_ABOVE: "above", fast.CENSOR_BELOW: "below"}
-    return res["critical_height"], np.array([names[int(c)] for c in res["censored"]],
-                                            dtype=object)
+    out = (res["critical_height"], np.array([names[int(c)] for c in res["censored"]],
+                                            dtype=object))
+    return out + (res["error_estimate"],) if with_error else out
+
+
+def region(error):
+    """Region name of a stated error (skidmc.solver.fast.fast_error_bound)."""
+    return {ERROR_ESTIMATE: "rebound", ERROR_STOPS_SLIDING: "stops sliding",
+            ERROR_SELF_HEATING: "self-heating"}[float(error)]
+
+
+def coverage_lines(scenes, label):
+    """Markdown rows: per region, scenes, median/p95/max |error| and the share within the
+    stated error (both models uncensored), and the censoring disagreements."""
+    h_full, c_full, _ = full_heights(scenes)
+    h_fast, c_fast, err = fast_heights(scenes, with_error=True)
+    both = np.array([a is None and b is None for a, b in zip(c_full, c_fast)])
+    rel = np.abs(np.where(both, h_fast / h_full - 1.0, np.nan))
+    regions = np.array([region(e) for e in err])
+    rows = []
+    for name in ("rebound", "stops sliding", "self-heating"):
+        m = (regions == name) & both
+        if not m.any():
+            continue
+        a = rel[m]
+        stated = float(err[m][0])
+        rows.append(f"| {label} | {name} | {stated:.0%} | {m.sum()} | {np.median(a):.3f} | "
+                    f"{np.quantile(a, 0.95):.3f} | {a.max():.3f} | "
+                    f"{np.mean(a <= stated):.1%} |")
+    n_dis = sum(a != b for a, b in zip(c_full, c_fast))
+    return rows, n_dis
 
 
 def fit(scenes):
@@ -229,6 +258,18 @@ def main(argv=None):
         if lab.startswith("preset/"):
             lines.append(f"| {lab[7:]} | {h_full[i] / 0.3048:.4g} | {h_fast[i] / 0.3048:.4g} "
                          f"| {rel[i]:+.3f} |")
+    lines += ["", "## Stated error by region and its coverage", "",
+              "`error_estimate` of a fast result is the bound of its region "
+              "(`skidmc.solver.fast.fast_error_bound`), chosen on the training set; *covered*: "
+              "share of scenes (both models uncensored) whose |H_fast / H_full - 1| is within "
+              "it. `fast_critical_height(..., strict=True)` refuses the stops-sliding and "
+              "self-heating regions. A fast height within its stated error of h_max (h_min) is "
+              "censored \"above\" (\"below\").", "",
+              "| set | region | stated | scenes | median abs | p95 abs | max abs | covered |",
+              "|---|---|---|---|---|---|---|---|"]
+    train_rows, _ = coverage_lines(scene_set("train"), "training")
+    test_rows, _ = coverage_lines(scenes, "test")
+    lines += train_rows + test_rows
     n_dis = int((~agree_cens).sum())
     lines += ["", f"Censoring disagreements (one model censored, the other not, or different "
               f"bounds): {n_dis} of {len(scenes)}."]

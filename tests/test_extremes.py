@@ -65,7 +65,8 @@ class Hang(AssertionError):
 @contextlib.contextmanager
 def watchdog(seconds):
     """Raise :class:`Hang` in the main thread after ``seconds`` (no-op where SIGALRM is missing)."""
-    if not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
+    if (not hasattr(signal, "setitimer")
+            or threading.current_thread() is not threading.main_thread()):
         yield
         return
 

@@ -1,5 +1,7 @@
-"""The fast tier (skidmc.physics.fast kernels, skidmc.solver.fast): Duhamel integral, agreement with the full model, trends,
-censoring and robustness at the extremes of the input ranges."""
+"""The fast tier (skidmc.physics.fast kernels, skidmc.solver.fast).
+
+Duhamel integral, agreement with the full model, trends, censoring and robustness at the extremes
+of the input ranges."""
 
 import math
 
@@ -326,3 +328,37 @@ def test_batched_inputs_are_validated_like_scenes():
     cols["initial_temperature"] = np.array([600.0])  # above the melting point
     with pytest.raises(SceneError):
         fast_critical_heights(**cols)
+
+
+def test_fast_height_within_its_error_of_h_max_is_censored_above():
+    # phi = 1 deg: the fast tier found 9,647 m, 3.5 % below h_max = 10 km, where the full tier
+    # finds no event up to h_max; within its stated error (7 %, sliding stops) it cannot tell.
+    from skidmc.scene import make_scene
+    from skidmc.solver import critical_height
+
+    scene = make_scene(preset="paper-quartz", angle=1.0)
+    res = critical_height(scene, tier="fast", h_max=1e4)
+    assert res.censored == "above" and res.critical_height == 1e4
+    assert critical_height(scene, rtol=1e-2, h_max=1e4).censored == "above"
+    batch = fast_critical_heights(h_max=1e4, **scene_columns([scene]))
+    assert batch["censored"][0] == CENSOR_ABOVE and batch["critical_height"][0] == 1e4
+
+
+def test_fast_stated_error_by_region_and_strict_refusal():
+    from skidmc.errors import SceneError
+    from skidmc.physics.fast import ERROR_ESTIMATE, ERROR_SELF_HEATING, ERROR_STOPS_SLIDING
+    from skidmc.scene import get_preset, make_scene
+    from skidmc.solver.fast import fast_critical_height
+
+    scenes = {"rebound": get_preset("paper-quartz"), "stops": get_preset("paper-gold"),
+              "self": make_scene(preset="paper-quartz",
+                                 **{"kinetics.activation_temperature": 15000.0})}
+    expected = {"rebound": ERROR_ESTIMATE, "stops": ERROR_STOPS_SLIDING,
+                "self": ERROR_SELF_HEATING}
+    batch = fast_critical_heights(**scene_columns(list(scenes.values())))
+    for (name, scene), batch_error in zip(scenes.items(), batch["error_estimate"]):
+        assert fast_critical_height(scene).error_estimate == expected[name] == batch_error
+    assert fast_critical_height(scenes["rebound"], strict=True).censored is None
+    for name in ("stops", "self"):
+        with pytest.raises(SceneError):
+            fast_critical_height(scenes[name], strict=True)

@@ -24,6 +24,8 @@ from skidmc.physics.fast import (
     CENSOR_BELOW,
     CENSOR_NONE,
     ERROR_ESTIMATE,
+    ERROR_SELF_HEATING,
+    ERROR_STOPS_SLIDING,
     MELT_FACTOR,
     MELT_TABLE,
     N_TIMES,
@@ -38,13 +40,15 @@ from skidmc.physics.mechanics import (
     impact_constants,
 )
 from skidmc.scene.keys import FIELDS, NUMERIC_KEYS, bound_reason, in_bounds
-from skidmc.solver.model import build_model
+from skidmc.solver.model import SELF_HEATING_TIME, build_model
 from skidmc.solver.results import HeightResult
 
 __all__ = [
+    "REFUSED_FLAGS",
     "SCENE_FIELDS",
     "fast_critical_height",
     "fast_critical_heights",
+    "fast_error_bound",
     "scene_columns",
     "theta_history",
 ]
@@ -58,6 +62,10 @@ _scene_values = operator.attrgetter(*SCENE_FIELDS)
 
 #: Scene key (skidmc.scene.keys) of each field, for the errors of :func:`_check_columns`.
 _KEY_OF_FIELD = {key.replace(".", "_"): key for key in NUMERIC_KEYS}
+
+#: Validity flags of the regions where the fast tier is known to fail beyond its rebound-exit
+#: bound: ``strict=True`` refuses them (docs/model.md, "Fast tier").
+REFUSED_FLAGS = ("stops_sliding", "self_heating")
 
 _CENSOR_NAMES = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
 _EXIT_NAMES = {EXIT_REBOUND: "rebound", EXIT_STOPS_SLIDING: "stops_sliding"}
@@ -92,8 +100,38 @@ def theta_history(scene, n_times=N_TIMES):
     return times, theta
 
 
+def fast_error_bound(flags):
+    """Stated relative error of a fast-tier height [1] for a scene with validity ``flags``.
+
+    :data:`~skidmc.physics.fast.ERROR_SELF_HEATING` for a self-heating HE,
+    :data:`~skidmc.physics.fast.ERROR_STOPS_SLIDING` where sliding stops before rebound, else
+    :data:`~skidmc.physics.fast.ERROR_ESTIMATE` (each measured, with its coverage, by
+    ``scripts/fast_tier_error.py``).
+    """
+    if "self_heating" in flags:
+        return ERROR_SELF_HEATING
+    if "stops_sliding" in flags:
+        return ERROR_STOPS_SLIDING
+    return ERROR_ESTIMATE
+
+
+def _censor_near_bounds(height, censored, error, h_min, h_max):
+    """A height within its stated ``error`` of a search bound is censored there [m, str].
+
+    The fast tier cannot tell which side of a bound such a height lies on: at phi = 1 deg it
+    found 9,647 m below h_max = 10 km where the full tier finds no event up to h_max. Within
+    ``error`` of h_max (H (1 + error) >= h_max) it reports "above", within it of h_min "below",
+    as the full tier would for a root that close to its bound.
+    """
+    if censored is None and height * (1.0 + error) >= h_max:
+        return h_max, "above"
+    if censored is None and height <= h_min * (1.0 + error):
+        return h_min, "below"
+    return height, censored
+
+
 def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,
-                         melt_factor=MELT_FACTOR):
+                         melt_factor=MELT_FACTOR, strict=False):
     """Critical drop height of a scene by the fast (reduced) tier [m].
 
     Parameters
@@ -108,14 +146,28 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
         The fitted constants (defaults :data:`C_IGNITION`, :data:`MELT_FACTOR`), exposed for the
         fit in ``scripts/fast_tier_error.py``.
 
+    strict : bool
+        Refuse (raise :class:`SceneError`) scenes in the regions where the tier is known to
+        fail beyond its rebound-exit bound (:data:`REFUSED_FLAGS`); by default they are
+        answered with their own, larger stated error and their validity flags.
+
     Returns
     -------
     skidmc.solver.HeightResult
         ``evaluations=0`` (no PDE run), ``method="fast"``, ``error_estimate`` =
-        :data:`ERROR_ESTIMATE` (measured, see module docstring).
+        :func:`fast_error_bound` of the scene's flags (measured, see
+        results/benchmarks/fast_tier.md). A height within that error of ``h_max`` or ``h_min``
+        is censored there (:func:`_censor_near_bounds`).
     """
     if not (0.0 < h_min < h_max):
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
+    # Terms and validity flags (scene and height) as the full tier infers them, without meshes.
+    model = build_model(scene, melting=melting, meshes=False)
+    error = fast_error_bound(model.flags)
+    refused = [f for f in REFUSED_FLAGS if f in model.flags]
+    if strict and refused:
+        raise SceneError("tier", "fast", f"the fast tier is refused where the scene is "
+                         f"{', '.join(refused)} (use the full tier)")
     args = list(_scene_values(scene))
     if not melting:
         args[10] = 0.0
@@ -124,11 +176,10 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
         _GL_X01, _GL_W01, N_TIMES)
     censored = _CENSOR_NAMES[int(cens)]
     height = {"above": h_max, "below": h_min}.get(censored, float(h))
-    # Terms and validity flags (scene and height) as the full tier infers them, without meshes.
-    model = build_model(scene, melting=melting, meshes=False)
+    height, censored = _censor_near_bounds(height, censored, error, h_min, h_max)
     return HeightResult(critical_height=height, censored=censored, evaluations=0,
                         flags=model.flags + model.height_flags(height),
-                        error_estimate=ERROR_ESTIMATE, rtol=ERROR_ESTIMATE, level=0.0,
+                        error_estimate=error, rtol=error, level=0.0,
                         method="fast", exit_time=float(t_exit),
                         exit_kind=_EXIT_NAMES[int(ecode)], terms=model.terms)
 
@@ -159,7 +210,9 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
     -------
     dict
         ``critical_height`` [m] (the bound for censored rows), ``censored`` (int codes
-        :data:`CENSOR_NONE`/``ABOVE``/``BELOW``), ``exit_time`` [s], ``exit_code``.
+        :data:`CENSOR_NONE`/``ABOVE``/``BELOW``), ``exit_time`` [s], ``exit_code``,
+        ``error_estimate`` [1] (:func:`fast_error_bound`; heights within it of a bound are
+        censored there, as :func:`fast_critical_height` does).
     """
     missing = [f for f in SCENE_FIELDS if f not in columns]
     if missing:
@@ -178,8 +231,33 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
     out_e = np.empty(n, dtype=np.int64)
     fast_heights_kernel(*arrays, float(h_min), float(h_max), float(c_ign), float(melt_factor),
                         MELT_TABLE, _GL_X01, _GL_W01, N_TIMES, out_h, out_c, out_t, out_e)
+    col = dict(zip(SCENE_FIELDS, arrays))
+    error = np.where(_self_heating(col), ERROR_SELF_HEATING,
+                     np.where(out_e == EXIT_STOPS_SLIDING, ERROR_STOPS_SLIDING, ERROR_ESTIMATE))
+    free = out_c == CENSOR_NONE
+    above = free & (out_h * (1.0 + error) >= h_max)
+    below = free & ~above & (out_h <= h_min * (1.0 + error))
+    out_h[above], out_c[above] = h_max, CENSOR_ABOVE
+    out_h[below], out_c[below] = h_min, CENSOR_BELOW
     return {"critical_height": out_h, "censored": out_c, "exit_time": out_t,
-            "exit_code": out_e}
+            "exit_code": out_e, "error_estimate": error}
+
+
+def _self_heating(col):
+    """Rows whose unheated HE runs away within :data:`SELF_HEATING_TIME` [bool array].
+
+    The full tier's rule (:func:`skidmc.solver.model.build_model`): min(1/k, tau_ad)(T0) < 1 h,
+    tau_ad = T0^2 / (T_a dT_ad k(T0)), dT_ad = Q / c of the HE.
+    """
+    t0 = col["initial_temperature"]
+    t_a = col["kinetics_activation_temperature"]
+    z = col["kinetics_prefactor"]
+    rise = col["kinetics_heat_of_reaction"] / col["he_heat_capacity"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ln_k0 = np.log(z) - t_a / t0
+        ln_ratio = np.where(rise > 0.0, np.log(t0**2 / (t_a * rise)), 0.0)
+        ln_rest = -ln_k0 + np.minimum(0.0, ln_ratio)
+    return (z > 0.0) & (ln_rest < np.log(SELF_HEATING_TIME))
 
 
 def _check_columns(arrays):
@@ -205,5 +283,8 @@ def _check_columns(arrays):
 
 
 def scene_columns(scenes):
-    """Columns of :data:`SCENE_FIELDS` from a sequence of scenes (for :func:`fast_critical_heights`)."""
+    """Columns of :data:`SCENE_FIELDS` from a sequence of scenes.
+
+    For :func:`fast_critical_heights`.
+    """
     return {f: np.array([float(getattr(s, f)) for s in scenes]) for f in SCENE_FIELDS}

@@ -56,7 +56,8 @@ HORIZON_EXIT_TIMES = 4.0
 #: 4 t_exit this is 4 sqrt(alpha t_exit): the insulated far end (an image source at twice its
 #: depth) changes the surface temperature under a constant flux by 2 ierfc(4) / ierfc(0)
 #: ~ 7e-9 of its rise at t_exit, which decides go/no-go, and by 2 ierfc(2) / ierfc(0) ~ 3e-3
-#: at t_end, late in the flux extension that only shapes the search margin. A shallower mesh puts its cells where the heat is: at level 1.5 the
+#: at t_end, late in the flux extension that only shapes the search margin. A shallower mesh
+#: puts its cells where the heat is: at level 1.5 the
 #: critical height's error is 0.8-0.9e-3 with depth 2 against 1.1e-3 with depth 4 (same cells,
 #: same cost), and the levels converge cleanly at second order from level 0 (measured on the
 #: report presets, results/validation/refinement.md).
@@ -192,7 +193,9 @@ def resolution_for_level(level, melt_width=None):
 
 
 def geometric_widths(first_width, depth, n_cells):
-    """Cell widths [m] of a geometric mesh: ``n_cells`` cells, first ``first_width``, total ``depth``.
+    """Cell widths [m] of a geometric mesh of ``n_cells`` cells, ``depth`` deep.
+
+    The first cell is ``first_width`` wide.
 
     The growth ratio r solves first_width (r^n - 1)/(r - 1) = depth; if even a uniform
     mesh of ``first_width`` cells is deeper than ``depth``, the mesh is uniform.

@@ -16,7 +16,9 @@ from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
 __all__ = [
     "DISCRETISATION_SHARE",
     "ERROR_LEVEL0",
+    "LIKELY_CORRECTION_FRACTION",
     "MAX_ADAPTIVE_LEVEL",
+    "MAX_ROOT_TOLERANCE",
     "MAX_MELT_WIDTH",
     "MELT_SHARE",
     "RICHARDSON_ERROR_LEVEL0",
@@ -32,7 +34,9 @@ __all__ = [
     "melt_bias_bound",
     "melt_width_for_rtol",
     "modelled_error",
+    "pair_root_tolerance",
     "plan_for_rtol",
+    "predicted_correction",
     "root_tolerance",
 ]
 
@@ -80,6 +84,18 @@ RICHARDSON_RESIDUAL_RATIO = 0.5
 #: width's bias bound and the root tolerance, added to it in the reported estimate, cover the
 #: other two (tests/test_error_estimate.py checks the total).
 RICHARDSON_RESIDUAL_RATIO_LEVEL0 = 0.75
+#: Fraction of the calibrated worst-case correction (:func:`predicted_correction`) expected of
+#: a pair when its root tolerance is first chosen (:func:`pair_root_tolerance`). On the 23
+#: scenes of benchmarks/solver.py the pair (0, 1) measured |c| = 0.6-2.3e-3 (median ~0.5 of
+#: the worst case 2.25e-3): 0.75 lets about one scene in six need its roots tightened
+#: afterwards (one or two more fine simulations) instead of every scene paying for a tight
+#: root finder.
+LIKELY_CORRECTION_FRACTION = 0.75
+#: Widest root tolerance on ln H [1]: the root finders' acceptance rules assume brackets of at
+#: most ~2 % (4 x_tol: linear interpolation across the no-go side's bend, whose slope changes
+#: by ~30 % within 0.5 % of H_c, and :data:`skidmc.solver.roots.JUMP_SLOPE`, which separates a
+#: jump from a smooth margin in brackets up to ~3 %).
+MAX_ROOT_TOLERANCE = 5e-3
 #: Finest level the default search refines to when its a posteriori estimate exceeds rtol.
 MAX_ADAPTIVE_LEVEL = 4.0
 
@@ -129,7 +145,7 @@ def level_for_rtol(rtol):
 
 
 def extrapolated_error(level):
-    """Modelled relative error of the Richardson value from levels ``level - 1`` and ``level`` [1]."""
+    """Modelled relative error of the Richardson value of levels ``level - 1`` and ``level`` [1]."""
     return RICHARDSON_ERROR_LEVEL0 * 4.0 ** (-level)
 
 
@@ -203,3 +219,37 @@ def melt_bias(terms, melt_width, level):
     if "melting" not in terms or melt_width <= melt_width_floor(level) * (1.0 + 1e-9):
         return 0.0
     return MELT_WIDTH_BIAS_PER_K * melt_width
+
+
+def predicted_correction(level):
+    """Likely size of the Richardson correction |c| of the pair ``(level - 1, level)`` [1].
+
+    With the levels' errors e_L ~ :data:`ERROR_LEVEL0` 4^-L (a worst case over the refinement
+    study), c = (H_L - H_{L-1}) / (3 R) ~ (e_{L-1} - e_L) / 3 = 0.25 ERROR_LEVEL0 4^-(L-1)
+    (2.25e-3 for the pair (0, 1)); :data:`LIKELY_CORRECTION_FRACTION` of that.
+    """
+    return LIKELY_CORRECTION_FRACTION * 0.25 * ERROR_LEVEL0 * 4.0 ** (-(level - 1.0))
+
+
+def pair_root_tolerance(rtol, level, melt_width):
+    """First tolerance of the root finder on ln H [1] for a default search's pair at ``level``.
+
+    What ``rtol`` leaves after the pair's a posteriori estimate predicted from the calibrated
+    model (:func:`a_posteriori_error` of :func:`predicted_correction`) and the melting width's
+    bias bound: the room the pair is likely not to use (at most :data:`MAX_ROOT_TOLERANCE`,
+    unless ROOT_SHARE rtol is more).
+    Where that is under twice :data:`ROOT_SHARE` rtol, ROOT_SHARE rtol: measured side by side
+    (``benchmarks/solver.py --compare``), a first tolerance 1.9x looser at rtol 3e-3 and 1e-3
+    cost 7-9 % more time, because the roots then had to be tightened on more scenes than it
+    saved simulations on the others. This is only a first choice: the reported estimate adds
+    the root errors the tolerances actually used allow to the pair's measured error, and the
+    search tightens the roots (or refines the pair) while that exceeds rtol. With w from
+    :func:`melt_width_for_rtol`: rtol 1e-2 -> 5e-3 (pair (0, 1), w = 4 K), 3e-3 -> 6e-4 and
+    1e-3 -> 2e-4 (the first pass of issue 16 fixed 0.2 rtol everywhere).
+    """
+    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0)
+                 + MELT_WIDTH_BIAS_PER_K * melt_width)
+    room = rtol - predicted
+    if room < 2.0 * ROOT_SHARE * rtol:
+        return ROOT_SHARE * rtol
+    return max(ROOT_SHARE * rtol, min(MAX_ROOT_TOLERANCE, room))

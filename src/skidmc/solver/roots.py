@@ -97,7 +97,7 @@ def go_side_slope(history):
 
 
 def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
-                  max_simulations=8):
+                  max_simulations=8, points=()):
     """Root of the margin on ln H by extrapolation from its go side (m <= 0); or None.
 
     For a rebound exit the margin is analytic on the go side up to the root: the event
@@ -110,8 +110,8 @@ def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
     it, far below ``x_tol``) or the secant's modelled bend error (:data:`GO_BEND`) is below
     ``x_tol / 2``. With one go point and a slope carried from a coarser level, the root is
     extrapolated along that slope and accepted when its modelled error, the distance times
-    :data:`CARRIED_GO_SLOPE_ERROR`, is below ``x_tol / 2``. The secant uses the farthest go point within :data:`GO_SECANT_SPAN`, which
-    keeps the margin's ~1e-5 step-size noise out of the slope.
+    :data:`CARRIED_GO_SLOPE_ERROR`, is below ``x_tol / 2``. The secant uses the farthest go point
+    within :data:`GO_SECANT_SPAN`, which keeps the margin's ~1e-5 step-size noise out of the slope.
 
     Each simulation aims just above the predicted root, by the prediction's own uncertainty
     (at least ``1.5 x_tol``), so that it lands on the go side: from a coarse level's root and
@@ -119,14 +119,16 @@ def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
     only bounds the root from below (and closes a bracket, accepted by linear interpolation
     when it is ``4 x_tol`` wide). Returns None when the steps leave [x_min, x_max], meet a
     non-finite margin, contradict monotonicity or do not converge: the caller then brackets
-    and runs Brent's method, reusing every simulation.
+    and runs Brent's method, reusing every simulation. ``points``: (x, m) already known (the
+    same search at a looser tolerance), used with the new ones.
     """
     known = slope is not None and slope < 0.0
     slope = slope if known else DEFAULT_GO_SLOPE
     slope_error = CARRIED_GO_SLOPE_ERROR if known else DEFAULT_GO_SLOPE_ERROR
     push = 1.5 * x_tol
-    go = []      # (x, m) with m <= 0, closest to the root first
-    lo = None    # (x, m) of the highest no-go point (m > 0)
+    go = sorted((x, m) for x, m in points if m <= 0.0)  # closest to the root first
+    no_go = [(x, m) for x, m in points if m > 0.0]
+    lo = max(no_go) if no_go else None  # (x, m) of the highest no-go point (m > 0)
     x = x_guess + guess_error
     for _ in range(max_simulations):
         m = _margin_inside(margin, x, x_min, x_max)

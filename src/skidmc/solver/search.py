@@ -21,9 +21,11 @@ import math
 import time
 
 from skidmc.errors import SceneError
-from skidmc.solver.model import build_model
+from skidmc.solver.model import build_model, melt_width_floor
 from skidmc.solver.plan import (
     MAX_ADAPTIVE_LEVEL,
+    MAX_ROOT_TOLERANCE,
+    MELT_SHARE,
     ROOT_SHARE,
     a_posteriori_error,
     extrapolated_error,
@@ -32,6 +34,7 @@ from skidmc.solver.plan import (
     melt_bias_bound,
     melt_width_for_rtol,
     modelled_error,
+    pair_root_tolerance,
     plan_for_rtol,
     root_tolerance,
 )
@@ -48,8 +51,12 @@ from skidmc.solver.roots import (
 )
 from skidmc.solver.simulate import simulate
 
-__all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "MELT_SHIFT_FACTOR", "TIERS",
-           "critical_height"]
+__all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "MAX_ADAPTIVE_ROUNDS",
+           "MELT_SHIFT_FACTOR", "TIERS", "critical_height"]
+
+#: Most corrections (tightened roots, a narrower melting width, a finer pair) the default
+#: search applies to its first Richardson pair before it reports the estimate it reached.
+MAX_ADAPTIVE_ROUNDS = 8
 
 #: The melting width's bias b(w) on the critical height [1] from the root's shift dx when the
 #: width is doubled: b(w) = 1.3-1.9 dx on the report presets (concave, first order in w); 2.5
@@ -146,11 +153,10 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
                   runaway_fraction=runaway_fraction, melt_width=float(melt_width))
     if adaptive:
-        # The root finder's share is fixed: the a posteriori estimate, not the calibrated
-        # model, decides whether the discretisation fits what is left.
-        x_tol = ROOT_SHARE * rtol
-    else:
-        x_tol = root_tolerance(rtol, level, extrapolate, melt_width)
+        # The root finder gets the room the pair is likely not to use; the a posteriori
+        # estimate, not the calibrated model, then decides whether it fits (_adaptive_pair).
+        return _adaptive_pair(scene, rtol, level, h_guess, common, start)
+    x_tol = root_tolerance(rtol, level, extrapolate, melt_width)
     if not extrapolate:
         res = _search(scene, rtol, level, x_tol, model=model, h_guess=h_guess, **common)
         res.wall_time = time.perf_counter() - start
@@ -158,43 +164,145 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
 
     # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
     # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
-    # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all (a refined pair's coarse
-    # level is the previous fine one, with half: 5/6 of it).
+    # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
     coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
-    # The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
-    # errors are negative and shrink 4x per level; the fine level keeps 1/4 of it): the
-    # go-side search starts that far up, which lands on the go side within the error model.
-    fine = _search(scene, rtol, level, 0.5 * x_tol,
+    fine = _fine_search(scene, rtol, level, 0.5 * x_tol, coarse, common)
+    res = _richardson(coarse, fine, x_tol, melt_width, False)
+    res.evaluations = coarse.evaluations + fine.evaluations
+    res.wall_time = time.perf_counter() - start
+    return res
+
+
+def _fine_search(scene, rtol, level, x_tol, coarse, common):
+    """The fine search of a Richardson pair, started from its coarse search's root and slopes.
+
+    The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
+    errors are negative and shrink 4x per level; the fine level keeps 1/4 of it): the go-side
+    search starts that far up, which lands on the go side within the error model.
+    """
+    return _search(scene, rtol, level, x_tol,
                    h_guess=coarse.critical_height if coarse.censored is None else None,
                    overshoot=0.75 * modelled_error(level - 1.0),
                    slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history),
                    **common)
+
+
+def _root_error(coarse_tol, fine_tol):
+    """Root-finder error bound [1] of a Richardson value from its searches' tolerances:
+    errors d_{L-1}, d_L enter R = H_L + (H_L - H_{L-1}) / 3 as (4 d_L + d_{L-1}) / 3."""
+    return (4.0 * fine_tol + coarse_tol) / 3.0
+
+
+def _adaptive_pair(scene, rtol, level, h_guess, common, start):
+    """The default search: a Richardson pair whose own estimate is brought within ``rtol``.
+
+    The first pair ``(level - 1, level)`` gets the root tolerance :func:`pair_root_tolerance`
+    (the room its estimate is likely to leave). Its estimate is then measured
+    (:func:`_richardson`: :func:`a_posteriori_error` of the correction, the melting width's
+    bias, and the root errors the tolerances used allow). While it exceeds rtol, the cheapest
+    fix that the measured parts say will do is applied:
+
+    * the pair's own error and the width's bias leave at least ROOT_SHARE rtol: tighten the
+      roots to what they leave (the fine search alone when that suffices: it weighs 4x), each
+      re-search starting from its own root and reusing its simulations (1-2 more);
+    * the width's measured bias exceeds twice its share (MELT_SHARE rtol) and the width can
+      narrow: search again with the width scaled to bring the bias to its share
+      (first order in w), at least the fine level's floor :func:`melt_width_floor`;
+    * otherwise move the pair up a level (its next fine root predicted from the pair), up to
+      :data:`MAX_ADAPTIVE_LEVEL`, unless the width's bias alone leaves no room and cannot
+      narrow further: then the estimate stays above rtol and says so.
+    """
+    melt_width = common["melt_width"]
+    x_tol = pair_root_tolerance(rtol, level, melt_width)
+    coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
+    coarse_tol, fine_tol = x_tol, 0.5 * x_tol
+    fine = _fine_search(scene, rtol, level, fine_tol, coarse, common)
     evaluations = coarse.evaluations + fine.evaluations
-    melt = None
-    if adaptive:
-        melt, extra = _melt_width_bias(scene, coarse, common)
-        evaluations += extra
-    res = _richardson(coarse, fine, x_tol, melt_width, adaptive, melt)
-    # Refine while the pair's own error is what exceeds rtol: a finer level cannot shrink the
-    # width's bias (a width measured to bias the height by more than rtol leaves an estimate
-    # above rtol: the result says so).
-    while (adaptive and res.extrapolated and res.error_estimate > rtol
-           and res.melt_bias_estimate + x_tol < rtol
-           and fine.level + 1.0 <= MAX_ADAPTIVE_LEVEL):
-        # Refine: the next level's root is predicted from this pair (its error is a quarter
-        # of the fine level's, which is about the correction), and the pair moves up a level.
-        correction = res.richardson_correction
-        guess = res.critical_height * (1.0 - 0.25 * correction)
-        finer = _search(scene, rtol, fine.level + 1.0, 0.5 * x_tol, h_guess=guess,
-                        overshoot=0.5 * abs(correction) + x_tol,
-                        slope=margin_slope(fine.history),
-                        go_slope=go_side_slope(fine.history), **common)
-        evaluations += finer.evaluations
-        coarse, fine = fine, finer
-        res = _richardson(coarse, fine, x_tol, melt_width, adaptive, melt)
+    melt, extra = _melt_width_bias(scene, coarse, common)
+    evaluations += extra
+    res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol), melt_width, True, melt)
+    narrowed = 0
+    for _ in range(MAX_ADAPTIVE_ROUNDS):
+        if not (res.extrapolated and res.error_estimate > rtol * (1.0 + 1e-12)):
+            break
+        pair = a_posteriori_error(res.richardson_correction, coarse.level)
+        room = rtol - pair - res.melt_bias_estimate
+        # Never below the coarse level's floor: a step far narrower than a level resolves is
+        # badly wrong there (model.MELT_WIDTH_LEVEL0).
+        floor = melt_width_floor(coarse.level)
+        if room >= ROOT_SHARE * rtol * (1.0 - 1e-9):
+            # Tighten the roots: the fine one alone when the coarse one's error still fits.
+            tight = (3.0 * room - coarse_tol) / 4.0
+            if tight >= 0.25 * room:
+                fine, n = _tighten(scene, rtol, fine, fine_tol, tight, common)
+                fine_tol = tight
+            else:
+                coarse, n = _tighten(scene, rtol, coarse, coarse_tol, room, common)
+                fine, m = _tighten(scene, rtol, fine, fine_tol, 0.5 * room, common)
+                coarse_tol, fine_tol, n = room, 0.5 * room, n + m
+            evaluations += n
+        elif (res.melt_bias_estimate > 2.0 * MELT_SHARE * rtol and narrowed < 2
+              and common["melt_width"] > floor * (1.0 + 1e-9)):
+            # The width's bias is first order in w: scale it to its share of rtol and search
+            # the pair again at the new width (from the old root), measuring its bias anew.
+            width = max(floor, common["melt_width"] * MELT_SHARE * rtol
+                        / res.melt_bias_estimate)
+            common = dict(common, melt_width=width)
+            narrowed += 1
+            x_tol = pair_root_tolerance(rtol, fine.level, width)
+            coarse = _search(scene, rtol, coarse.level, x_tol, h_guess=coarse.critical_height,
+                             overshoot=2.0 * res.melt_bias_estimate + x_tol,
+                             slope=margin_slope(coarse.history),
+                             go_slope=go_side_slope(coarse.history), **common)
+            coarse_tol, fine_tol = x_tol, 0.5 * x_tol
+            fine = _fine_search(scene, rtol, fine.level, fine_tol, coarse, common)
+            melt, extra = _melt_width_bias(scene, coarse, common)
+            evaluations += coarse.evaluations + fine.evaluations + extra
+        elif fine.level + 1.0 <= MAX_ADAPTIVE_LEVEL and (
+                res.melt_bias_estimate + ROOT_SHARE * rtol < rtol
+                or (narrowed < 2 and common["melt_width"] > melt_width_floor(fine.level)
+                    * (1.0 + 1e-9))):
+            # Refine (also where only a finer level's floor lets the width narrow further):
+            # the next level's root is predicted from this pair (its error is a quarter of
+            # the fine level's, which is about the correction), and the pair moves up a
+            # level. Its correction should shrink 4x; half is assumed.
+            correction = res.richardson_correction
+            room = (rtol - res.melt_bias_estimate
+                    - a_posteriori_error(0.5 * correction, fine.level))
+            tight = min(MAX_ROOT_TOLERANCE,
+                        max(0.5 * ROOT_SHARE * rtol, (3.0 * room - fine_tol) / 4.0))
+            guess = res.critical_height * (1.0 - 0.25 * correction)
+            finer = _search(scene, rtol, fine.level + 1.0, tight, h_guess=guess,
+                            overshoot=0.5 * abs(correction) + tight,
+                            slope=margin_slope(fine.history),
+                            go_slope=go_side_slope(fine.history), **common)
+            evaluations += finer.evaluations
+            coarse, fine = fine, finer
+            coarse_tol, fine_tol = fine_tol, tight
+        else:
+            break
+        res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol),
+                          common["melt_width"], True, melt)
     res.evaluations = evaluations
     res.wall_time = time.perf_counter() - start
     return res
+
+
+def _tighten(scene, rtol, search, old_tol, tol, common):
+    """``search`` again at the tighter root tolerance ``tol`` [1], from its own root.
+
+    The root lies within ``old_tol`` of the old one: the new search starts there, with the old
+    search's slopes and simulations (no height is simulated twice). Returns the new search and
+    the simulations it added.
+    """
+    if search.censored is not None:
+        return search, 0
+    new = _search(scene, rtol, search.level, tol, h_guess=search.critical_height,
+                  overshoot=old_tol, slope=margin_slope(search.history),
+                  go_slope=go_side_slope(search.history), known=search.history, **common)
+    added = new.evaluations
+    new.evaluations += search.evaluations
+    return new, added
 
 
 def _melt_width_bias(scene, coarse, common):
@@ -240,8 +348,10 @@ def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None):
     """The Richardson value of a pair of searches (a new result; ``fine`` if either is censored).
 
     Its ``error_estimate`` [1] is, for the default (``adaptive``) search, measured on the pair:
-    :func:`a_posteriori_error` of its correction, plus the melting width's bias bound and the
-    root finder's tolerance ``x_tol``; otherwise the calibrated model's.
+    :func:`a_posteriori_error` of its correction, plus the melting width's bias (the bound, or
+    ``melt`` measured on the scene when larger) and ``x_tol``, the root errors its searches'
+    tolerances allow (:func:`_root_error`); otherwise the calibrated model's, with ``x_tol``
+    the plan's root tolerance.
     """
     res = dataclasses.replace(fine, history=list(fine.history))
     if fine.censored is not None or coarse.censored is not None:
@@ -261,14 +371,17 @@ def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None):
     return res
 
 def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
-            melt_width, model=None, h_guess=None, overshoot=None, slope=None, go_slope=None):
+            melt_width, model=None, h_guess=None, overshoot=None, slope=None, go_slope=None,
+            known=()):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
     from the root found at ``level - COARSE_GAP`` (levels >= COARSE_GAP) or from the fast
     tier's height. From a guess, steps that bracket the predicted root (:func:`guided_root`)
     usually converge in 3-4 simulations; otherwise bracketing and Brent's method take over,
-    reusing every simulation done.
+    reusing every simulation done. ``known``: (H [m], margin) already simulated with this
+    search's model (a search repeated at a tighter tolerance): reused, and counted only in the
+    earlier search's evaluations.
     """
     own_model = model is None
     if own_model:
@@ -302,7 +415,9 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         if fast is not None:
             h_guess, overshoot = fast, FAST_GUESS_ERROR
 
-    cache = {}
+    cache = {math.log(h): m for h, m in known}
+    n_known = len(cache)
+    points = [(x, m) for x, m in cache.items() if math.isfinite(m)]
 
     def margin(x):
         if x not in cache:
@@ -315,14 +430,14 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         x_root, censored = bisection_root(margin, x_min, x_max, x_tol)
     elif h_guess is not None and model.exit_kind == "rebound":
         x_root = go_side_root(margin, math.log(h_guess), go_slope, x_tol, x_min, x_max,
-                               guess_error=overshoot or FAST_GUESS_ERROR)
+                               guess_error=overshoot or FAST_GUESS_ERROR, points=points)
         censored = None
     elif h_guess is not None:
         # Sliding stops before rebound: the margin may jump at the root. Start at the predicted
         # root, half the guess's uncertainty up, and bracket it within that uncertainty.
         spread = 0.5 * (overshoot or FAST_GUESS_ERROR)
         x_root, censored = guided_root(margin, math.log(h_guess) + spread, slope, x_tol, x_min,
-                                       x_max, spread=spread), None
+                                       x_max, spread=spread, points=points), None
     if x_root is None:
         x_root, censored = brent_root(margin, x_min, x_max, x_tol,
                                        math.log(model.end_time / model.exit_time), h_guess,
@@ -333,7 +448,8 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     # Validity at the height found (indentation depth, sliding distance): skidmc.model.
     base["flags"] = model.flags + model.height_flags(height)
     return HeightResult(critical_height=height, censored=censored,
-                        evaluations=len(cache) + coarse_evaluations, history=history, **base)
+                        evaluations=len(cache) - n_known + coarse_evaluations, history=history,
+                        **base)
 
 
 def _fast_guess(scene, h_min, h_max, melting):

@@ -1,0 +1,70 @@
+"""The default search's corrections of its first Richardson pair (issue 16, second pass).
+
+The root finder first gets the room the pair is likely not to use
+(:func:`skidmc.solver.plan.pair_root_tolerance`); a root that then does not fit is tightened from
+its own simulations; a melting width whose measured bias exceeds its share is narrowed
+(docs/model.md, "Accuracy control").
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from test_extremes import _rate_at_ref
+
+from skidmc.scene import get_preset, make_scene
+from skidmc.solver import critical_height
+from skidmc.solver.plan import (
+    MAX_ROOT_TOLERANCE,
+    ROOT_SHARE,
+    first_pair_level,
+    melt_width_for_rtol,
+    pair_root_tolerance,
+)
+from skidmc.solver.search import _search, _tighten
+
+
+@pytest.mark.parametrize("rtol", [3e-2, 1e-2, 5e-3, 3e-3, 1e-3, 1e-4])
+def test_pair_root_tolerance_is_the_room_left_or_the_root_share(rtol):
+    level = first_pair_level(rtol)
+    x_tol = pair_root_tolerance(rtol, level, melt_width_for_rtol(rtol, level))
+    assert x_tol >= ROOT_SHARE * rtol * (1 - 1e-12)
+    assert x_tol <= max(MAX_ROOT_TOLERANCE, ROOT_SHARE * rtol)
+    assert x_tol < rtol
+
+
+def test_the_studies_rtol_gets_a_looser_root():
+    # rtol 1e-2 (the shipped studies): the pair (0, 1) is likely to use ~2.5e-3 of it.
+    assert pair_root_tolerance(1e-2, 1.0, 4.0) == pytest.approx(MAX_ROOT_TOLERANCE)
+
+
+def test_a_tightened_root_reuses_its_simulations():
+    scene = get_preset("paper-quartz")
+    common = dict(h_min=1e-3, h_max=1e4, method="brent", melting=True, runaway_fraction=None,
+                  melt_width=4.0)
+    loose = _search(scene, 1e-2, 1.0, 5e-3, **common)
+    tight, added = _tighten(scene, 1e-2, loose, 5e-3, 2e-4, common)
+    reference = _search(scene, 1e-2, 1.0, 1e-6, **common)
+    # The tightened root is within its new tolerance of a root found 200x tighter.
+    assert abs(math.log(tight.critical_height / reference.critical_height)) <= 2e-4
+    # A height is never simulated twice; tightening a root that is already within 5e-3 takes a
+    # couple of simulations (a go point above it and the secant), never a new search.
+    assert tight.evaluations == loose.evaluations + added
+    assert len(tight.history) == len({h for h, _ in tight.history}) == tight.evaluations
+    assert 1 <= added <= 3
+
+
+def test_a_melting_bias_above_its_share_narrows_the_width():
+    # E/R = 15,000 K with the rate at 575 K kept (as paper-series1 samples it): ignition starts
+    # below the melting point and the 3 K width of rtol 3e-3 biases the height by ~6e-3. The
+    # first pass of issue 16 returned it 6.4e-3 off (estimate 1.1e-2); narrowing the width
+    # brings the height within rtol of a tight solve (measured 2.7e-3, estimate still above
+    # rtol: the bias measured at the coarse level stays conservative).
+    scene = make_scene(preset="paper-quartz", **{
+        "kinetics.activation_temperature": 15000.0,
+        "kinetics.prefactor": _rate_at_ref(15000.0, 575.0)})
+    res = critical_height(scene, rtol=3e-3)
+    ref = critical_height(scene, rtol=3e-4)
+    assert abs(res.critical_height / ref.critical_height - 1.0) <= 3e-3 + ref.error_estimate
+    assert abs(res.critical_height / ref.critical_height - 1.0) <= res.error_estimate
