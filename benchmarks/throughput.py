@@ -6,7 +6,8 @@ a. Scaling: one batch of scenes (the first 200 samples of ``studies/paper-series
    each of its 4 scenes: 800 scenes, at the study's rtol = 1e-2) evaluated with 1 worker (in
    process) and with 2 worker processes, alternated in rounds in one run so that both see the
    same machine load. The 2-worker batch runs on the warm pool that ``evaluate_batch`` keeps
-   between calls, and once on a cold one (worker start-up included). Results must be bitwise identical (checked).
+   between calls, and once on a cold one (worker start-up included). Results must be bitwise
+   identical (checked).
 b. First-call latency of ``critical_height`` in a fresh Python process: imports, first call
    (numba compiles or loads the kernels) and second call, with an empty numba cache
    (``NUMBA_CACHE_DIR`` a fresh temporary folder: compile) and then with that warm cache.

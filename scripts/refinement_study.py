@@ -31,11 +31,16 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from skidmc.solver.model import melt_width_floor, resolution_for_level  # noqa: E402
 from skidmc.scene import make_scene  # noqa: E402
 from skidmc.solver import critical_height  # noqa: E402
-from skidmc.solver.plan import (ERROR_LEVEL0, RICHARDSON_ERROR_LEVEL0,  # noqa: E402
-                                RICHARDSON_MIN_LEVEL, level_for_rtol, plan_for_rtol)
+from skidmc.solver.model import melt_width_floor, resolution_for_level  # noqa: E402
+from skidmc.solver.plan import (  # noqa: E402
+    ERROR_LEVEL0,
+    RICHARDSON_ERROR_LEVEL0,
+    RICHARDSON_MIN_LEVEL,
+    level_for_rtol,
+    plan_for_rtol,
+)
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
 LEVELS = [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0]
@@ -57,6 +62,7 @@ def main():
     args = parser.parse_args()
     levels = [lv for lv in LEVELS if lv <= args.max_level]
     suffix = "" if args.melt_width is None else f"_w{args.melt_width:g}"
+    option = f" --melt-width {args.melt_width:g}" if suffix else ""
     width_text = ("the solver's floor 2 K * 2^-L" if args.melt_width is None
                   else f"{args.melt_width:g} K at every level")
     OUT.mkdir(parents=True, exist_ok=True)
@@ -90,9 +96,10 @@ def main():
     lines = [
         "# Refinement study: error of the critical height vs resolution level",
         "",
-        f"`python scripts/refinement_study.py{' --melt-width ' + format(args.melt_width, 'g') if suffix else ''}`"
-        f" (melting-step width: {width_text}). Converged value: Richardson extrapolation of levels "
-        f"{levels[-3]:g} and {levels[-1]:g} (second order). Relative error of each level against it.",
+        f"`python scripts/refinement_study.py{option}`"
+        f" (melting-step width: {width_text}). Converged value: Richardson extrapolation of "
+        f"levels {levels[-3]:g} and {levels[-1]:g} (second order). Relative error of each level "
+        "against it.",
         "",
         "| case | converged H [m] | converged H [ft] | "
         + " | ".join(f"L{lv:g}" for lv in levels) + " | observed order (L1->L3) |",
@@ -140,7 +147,8 @@ def main():
         f"(The values at L >= {levels[-2]:g} use the L{levels[-1]:g} data that define the "
         "converged value, so they are not independent.)",
         "",
-        "The solver chooses the cheapest plan whose error model is below 0.6 rtol (DISCRETISATION_SHARE): "
+        "The solver chooses the cheapest plan whose error model is below 0.6 rtol "
+        "(DISCRETISATION_SHARE): "
         + ", ".join(f"rtol {r:g} -> level {plan_for_rtol(r)[0]:g}"
                     + (" extrapolated" if plan_for_rtol(r)[1] else "")
                     for r in (1e-2, 3e-3, 1e-3, 1e-4))

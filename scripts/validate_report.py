@@ -36,8 +36,8 @@ def main():
                 table=table, preset=row.preset, label=row.label, mu=row.mu,
                 report_ft=row.calculated_ft, skidmc_ft=res.critical_height_ft,
                 diff=res.critical_height_ft / row.calculated_ft - 1.0,
-                experimental=f"{'' if row.experimental_qualifier == '=' else row.experimental_qualifier}"
-                             f"{row.experimental_ft:g}",
+                experimental=(row.experimental_qualifier.replace("=", "")
+                              + f"{row.experimental_ft:g}"),
                 experimental_ft=row.experimental_ft, censored=res.censored or "",
                 error=res.error_estimate, evaluations=res.evaluations,
                 wall_ms=1e3 * res.wall_time, exit=res.exit_kind))
@@ -61,7 +61,8 @@ def main():
     ]
     for r in rows:
         lines.append(
-            f"| {r['table']} | {r['label']} | {r['mu']} | {r['report_ft']:g} | {r['skidmc_ft']:.3f} | "
+            f"| {r['table']} | {r['label']} | {r['mu']} | {r['report_ft']:g} | "
+            f"{r['skidmc_ft']:.3f} | "
             f"{100 * r['diff']:+.1f} % | {r['experimental']} | {r['exit']} | {r['error']:.1e} | "
             f"{r['evaluations']} | {r['wall_ms']:.0f} |")
     lines += [
@@ -80,7 +81,8 @@ def main():
     x = range(len(first))
     ax1.semilogy(x, [r["report_ft"] for r in first], "s", label="report, calculated")
     ax1.semilogy(x, [r["skidmc_ft"] for r in first], "o", mfc="none", ms=10, label="skidmc")
-    ax1.semilogy(x, [r["experimental_ft"] for r in first], "^", label="experimental 50 % (gold: > 150)")
+    ax1.semilogy(x, [r["experimental_ft"] for r in first], "^",
+                 label="experimental 50 % (gold: > 150)")
     ax1.set_xticks(list(x), [r["preset"].replace("paper-", "") for r in first])
     ax1.set_ylabel("critical drop height [ft]")
     ax1.set_title("First series (Table VIII)")
