@@ -122,6 +122,12 @@ def test_sobol_on_a_saltelli_ensemble_ranks_the_inputs():
     assert res["ST_low"].sel(parameter="mu") < 16 / 17 < res["ST_high"].sel(parameter="mu")
     assert bool(res["ST_contains_zero"].sel(parameter="angle"))
     assert res.attrs["censored_share"] == 0.0
+    # The event at a drop from the median height: decided by mu and the conductivity alike
+    # (their ln H terms are monotone, so each moves the event), never by the angle.
+    event = ensemble_sobol(ds, "s", resamples=200, drop_height=float(np.median(height)))
+    assert "event" in event.attrs["output"]
+    assert event["ST"].sel(parameter="mu") > event["ST"].sel(parameter="flow_stress") > 0.0
+    assert bool(event["ST_contains_zero"].sel(parameter="angle"))
 
 
 def test_sobol_refuses_other_designs():

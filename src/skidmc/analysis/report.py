@@ -23,6 +23,7 @@ into a folder. Heights are reported in feet (the report's unit) and metres.
 from __future__ import annotations
 
 import ast
+import dataclasses
 import json
 import math
 from collections.abc import Mapping
@@ -140,6 +141,8 @@ class SceneAnalysis:
         Sobol' indices of ln H_c (``saltelli`` designs).
     sobol_convergence : xarray.Dataset or None
         The same against N (200 bootstrap resamples per N).
+    sobol_event : xarray.Dataset or None
+        Sobol' indices of the event (go) at a drop from the fitted median critical height.
     """
 
     scene: str
@@ -153,6 +156,7 @@ class SceneAnalysis:
     scores: object | None = None
     sobol: xr.Dataset | None = None
     sobol_convergence: xr.Dataset | None = None
+    sobol_event: xr.Dataset | None = None
     notes: list = field(default_factory=list)
 
     def predicted_h50(self) -> tuple[float, float, float]:
@@ -294,6 +298,10 @@ def analyse_scene(ds: xr.Dataset, scene: str, *, experiment: str | None = None,
         analysis.sobol = ensemble_sobol(ds, scene, confidence=confidence)
         analysis.sobol_convergence = ensemble_sobol(ds, scene, confidence=confidence,
                                                     resamples=200, convergence=True)
+        # What decides a go at the median critical height, where the event varies most.
+        if fit is not None:
+            analysis.sobol_event = ensemble_sobol(ds, scene, confidence=confidence,
+                                                  drop_height=fit.h50 * FT)
     return analysis
 
 
@@ -312,7 +320,7 @@ def _design_keys(ds: xr.Dataset) -> list[str]:
 
 def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
                    resamples: int = 1000, seed: int = 0, policy: str = "cap+drop",
-                   convergence: bool = False) -> xr.Dataset:
+                   convergence: bool = False, drop_height: float | None = None) -> xr.Dataset:
     """Sobol' indices of ln H_c of one scene of a ``saltelli`` ensemble.
 
     The design columns are the study's uncertain keys (uniform on [0, 1), mapped to each scene's
@@ -330,6 +338,10 @@ def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
         Censored and failed samples (:func:`~skidmc.analysis.sensitivity.prepare_output`): by
         default ln min(H, h_max) for censored samples and the whole linked block of a failed
         sample dropped; the shares affected are in the result's attributes.
+    drop_height : float, optional
+        Analyse the event at this drop height [m] (1 where H_c <= drop_height:
+        :func:`~skidmc.analysis.sensitivity.event_indicator`) instead of ln H_c: what decides
+        whether a drop from that height goes.
     convergence : bool
         Return the indices against N instead (the first n base rows, n = 16, 32, ..., N:
         :func:`~skidmc.analysis.sensitivity.sobol_convergence`).
@@ -356,6 +368,14 @@ def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
     prepared = prepare_output(sub["critical_height"].values.reshape(-1), status, policy=policy,
                               h_max=float(ds.attrs["solver_h_max"]), problem=problem,
                               second_order=second)
+    output_name = "ln critical_height [ln m]"
+    if drop_height is not None:
+        from skidmc.analysis.sensitivity import event_indicator
+
+        # prepare_output's output is ln min(H, h_max) of the kept rows: the event needs H itself.
+        prepared = dataclasses.replace(
+            prepared, output=event_indicator(np.exp(prepared.output), drop_height))
+        output_name = f"event at a drop from {drop_height:.4g} m (1 where H_c <= H)"
     if convergence:
         from skidmc.analysis.sensitivity import sobol_convergence
 
@@ -363,7 +383,7 @@ def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
                                  confidence=confidence, resamples=resamples, seed=seed)
     res = sobol_indices(problem, prepared.output, second_order=second, confidence=confidence,
                         resamples=resamples, seed=seed)
-    res.attrs.update(output="ln critical_height [ln m]", policy=str(policy),
+    res.attrs.update(output=output_name, policy=str(policy),
                      censored_share=prepared.censored_share,
                      failed_share=prepared.failed_share, dropped_share=prepared.dropped_share)
     return res
@@ -483,6 +503,17 @@ def _json_safe(obj):
     return obj
 
 
+def _sobol_rows(res: xr.Dataset) -> list[str]:
+    rows = []
+    for rank, i in enumerate(np.argsort(-res["ST"].values), 1):
+        r = res.isel(parameter=i)
+        flag = " (interval contains 0)" if bool(r["ST_contains_zero"]) else ""
+        rows.append(f"| {rank} | {str(r['parameter'].values)} | "
+                    f"{_triple((float(r.S1), float(r.S1_low), float(r.S1_high)))} | "
+                    f"{_triple((float(r.ST), float(r.ST_low), float(r.ST_high)))}{flag} |")
+    return rows
+
+
 def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str:
     lines = [f"# {ds.attrs.get('study_name', 'ensemble')}: go-probability report", "",
              f"Generated by `skidmc report {source}` from `{source}` "
@@ -559,19 +590,17 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str
         lines += ["", "## Sobol' indices of ln H_c", ""]
         for a in with_sobol:
             res = a.sobol
-            order = np.argsort(-res["ST"].values)
             lines += [f"### {a.scene}", "",
                       f"N = {res.attrs.get('N')}, interval {res.attrs.get('interval')}, censored "
                       f"share {_fmt(res.attrs.get('censored_share'), 2)}, dropped share "
                       f"{_fmt(res.attrs.get('dropped_share'), 2)}", "",
                       "| rank | input | S1 | ST |", "|---|---|---|---|"]
-            for rank, i in enumerate(order, 1):
-                r = res.isel(parameter=i)
-                flag = " (interval contains 0)" if bool(r["ST_contains_zero"]) else ""
-                lines.append(f"| {rank} | {str(r['parameter'].values)} | "
-                             f"{_triple((float(r.S1), float(r.S1_low), float(r.S1_high)))} | "
-                             f"{_triple((float(r.ST), float(r.ST_low), float(r.ST_high)))}"
-                             f"{flag} |")
+            lines += _sobol_rows(res)
+            if a.sobol_event is not None:
+                lines += ["", f"What decides a go at H = {a.fit.h50:.3g} ft (the median critical "
+                          "height): indices of the event indicator.", "",
+                          "| rank | input | S1 | ST |", "|---|---|---|---|"]
+                lines += _sobol_rows(a.sobol_event)
             lines.append("")
     lines += ["", "Figures: `go_<scene>.png` (P(go | H) with its band, the log-normal fit and the "
               "drops), `h50.png` (predicted against experimental 50 % heights), `qq.png` "
@@ -712,6 +741,23 @@ def _curves_dataset(analyses: list[SceneAnalysis]) -> xr.Dataset:
     return ds
 
 
+def _sobol_dataset(analyses: list[SceneAnalysis]) -> xr.Dataset:
+    """Every scene's indices (of ln H_c, and of the event at its median height) in one file."""
+    parts = []
+    for a in analyses:
+        for output, res in (("log_height", a.sobol), ("event_at_h50", a.sobol_event)):
+            if res is None:
+                continue
+            keep = [v for v in res.data_vars if res[v].dims == ("parameter",)]
+            parts.append(res[keep].astype(float).expand_dims(scene=[a.scene], output=[output]))
+    ds = xr.merge(parts, join="outer", compat="no_conflicts", combine_attrs="drop")
+    first = analyses[0].sobol.attrs
+    ds.attrs = {k: v for k, v in first.items() if isinstance(v, (int, float, str))}
+    ds.attrs["description"] = ("Sobol' indices per scene: of ln H_c (log_height) and of the go "
+                               "event at a drop from the fitted median height (event_at_h50)")
+    return ds
+
+
 def write_report(ds: xr.Dataset, out_dir: str | Path, *, source: str = "",
                  experiments: Mapping[str, str] | None = None,
                  confidence: float = 0.95) -> dict:
@@ -746,4 +792,9 @@ def write_report(ds: xr.Dataset, out_dir: str | Path, *, source: str = "",
     curves_path = out / "curves.h5"
     _curves_dataset(analyses).to_netcdf(curves_path, engine="h5netcdf")
     files += [out / "summary.json", out / "summary.md", curves_path]
+    with_sobol = [a for a in analyses if a.sobol is not None]
+    if with_sobol:
+        sobol_path = out / "sobol.h5"
+        _sobol_dataset(with_sobol).to_netcdf(sobol_path, engine="h5netcdf")
+        files.append(sobol_path)
     return {"analyses": analyses, "files": files}
