@@ -23,6 +23,11 @@ import numpy as np
 import pytest
 import scipy.stats
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10
+    import tomli as tomllib
+
 from skidmc import errors
 from skidmc.ensemble.study import (
     RATE_AT_REFERENCE,
@@ -119,6 +124,39 @@ def test_malformed_study_is_rejected(path):
     assert err.key == expected["key"], str(err)
     assert re.search(expected["match"], str(err)), str(err)
     assert str(path) in str(err) and err.file == str(path)
+    # The offending value is the one the user wrote (not its SI conversion), shown in the message.
+    # (Tables and lists, e.g. a [[correlation]] array, are named by a digest, not verbatim.)
+    written = _value_at(path, err.key) if err.key != "(syntax)" else _ABSENT
+    if isinstance(written, (str, int, float)) and err.value is not None:
+        assert err.value == written, (err.value, written)
+        assert f"{err.key} = {err.value!r}" in str(err) or f"= {err.value}" in str(err), str(err)
+
+
+_ABSENT = object()
+
+
+def _value_at(path: Path, key: str):
+    """The value at a TOML key path as written in the file (``_ABSENT`` if there is none)."""
+    node = tomllib.loads(path.read_text())
+    for part in re.findall(r'"[^"]*"|[^."\[\]]+|\[\d+\]', key):
+        if part.startswith("["):
+            index = int(part[1:-1])
+            if not isinstance(node, list) or index >= len(node):
+                return _ABSENT
+            node = node[index]
+            continue
+        name = part.strip('"')
+        if not isinstance(node, dict) or name not in node:
+            return _ABSENT
+        node = node[name]
+    return node
+
+
+def test_value_at_reads_the_written_value(tmp_path):
+    f = tmp_path / "s.toml"
+    f.write_text('[[scenes]]\nname = "a"\n[scenes.uncertain."target.conductivity"]\na = 3\n')
+    assert _value_at(f, 'scenes[0].uncertain."target.conductivity".a') == 3
+    assert _value_at(f, "scenes[1].name") is _ABSENT
 
 
 def test_unreadable_file_names_it(tmp_path):
