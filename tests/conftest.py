@@ -179,7 +179,8 @@ def cli_runs(monkeypatch):
 
     def execute_study(study, out=None, **kwargs):
         calls.append({"study": study, "out": out, **kwargs})
-        kwargs.setdefault("solver", fake_height)
+        if kwargs.get("solver") is None:
+            kwargs["solver"] = fake_height
         return real(study, out, **kwargs)
 
     monkeypatch.setattr(run_module, "execute_study", execute_study)

@@ -1,6 +1,6 @@
 """Tests of the command line (skidmc.cli).
 
-``height`` is tested against a stand-in solver module placed in ``sys.modules``, so that these
+``height`` is tested with a stand-in solver passed to ``main(..., solver=...)``, so that these
 tests check the CLI's plumbing in milliseconds; one slow test runs the real solver. ``run`` is
 tested with the stand-in solver injected into the run (tests/conftest.py, ``cli_runs``).
 """
@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import re
 import shutil
-import sys
 import types
 
 import h5py
@@ -25,13 +24,15 @@ from skidmc.solver.model import FLAG_MEANINGS
 FT = 0.3048  # m, exact
 
 
-@pytest.fixture
-def fake_solver(monkeypatch):
-    """Replace ``skidmc.solver`` by a module whose critical_height records its call."""
-    calls = []
+class _RecordingSolver:
+    """A stand-in for skidmc.solver.critical_height that records its calls."""
 
-    def critical_height(scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
-        calls.append({"scene": scene, "rtol": rtol, "tier": tier, "h_min": h_min, "h_max": h_max})
+    def __init__(self):
+        self.calls = []
+
+    def __call__(self, scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
+        self.calls.append({"scene": scene, "rtol": rtol, "tier": tier, "h_min": h_min,
+                           "h_max": h_max})
         censored = "above" if scene.mu == 0.0 else None
         height = h_max if censored else 0.381
         fast = tier == "fast"
@@ -43,11 +44,11 @@ def fake_solver(monkeypatch):
             to_dict=lambda: {"critical_height_m": height, "error_estimate": error, "level": 2.0},
         )
 
-    module = types.ModuleType("skidmc.solver")
-    module.critical_height = critical_height
-    module.FLAG_MEANINGS = FLAG_MEANINGS
-    monkeypatch.setitem(sys.modules, "skidmc.solver", module)
-    return calls
+
+@pytest.fixture
+def fake_solver():
+    """A recording stand-in solver, passed to ``main(..., solver=fake_solver)``."""
+    return _RecordingSolver()
 
 
 def test_presets_table(capsys):
@@ -78,7 +79,7 @@ def test_presets_unknown_name_exits_2(capsys):
 def test_height_json(fake_solver, capsys):
     argv = ["height", "--preset", "paper2-quartz", "--set", "mu=0.056",
             "--set", "flow_stress=34400 psi", "--rtol", "1e-2", "--h-min", "1 ft", "--json"]
-    assert main(argv) == 0
+    assert main(argv, solver=fake_solver) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["critical_height_m"] == 0.381
     assert data["critical_height_ft"] == pytest.approx(0.381 / FT, rel=1e-12)
@@ -90,14 +91,15 @@ def test_height_json(fake_solver, capsys):
     assert data["scene"]["mu"] == {"value": 0.056, "units": "1"}
     assert data["scene"]["flow_stress"]["units"] == "Pa"
     assert data["overrides"] == {"mu": "0.056", "flow_stress": "34400 psi"}
-    (call,) = fake_solver
+    (call,) = fake_solver.calls
     assert call["scene"].mu == 0.056 and call["rtol"] == 1e-2
     assert call["h_min"] == pytest.approx(FT, rel=1e-12)
     assert call["h_max"] == 1e4  # not given: the solver's default
 
 
 def test_height_table(fake_solver, capsys):
-    assert main(["height", "--preset", "paper-quartz", "--set", "he.density=1.85 g/cm^3"]) == 0
+    argv = ["height", "--preset", "paper-quartz", "--set", "he.density=1.85 g/cm^3"]
+    assert main(argv, solver=fake_solver) == 0
     out = capsys.readouterr().out
     assert "0.381 m" in out and "1.25 ft" in out
     assert "he.density = 1.85 g/cm^3" in out
@@ -107,7 +109,8 @@ def test_height_table(fake_solver, capsys):
 
 
 def test_height_table_explains_every_flag(fake_solver, capsys):
-    assert main(["height", "--preset", "paper-quartz", "--set", "angle=1 deg"]) == 0
+    argv = ["height", "--preset", "paper-quartz", "--set", "angle=1 deg"]
+    assert main(argv, solver=fake_solver) == 0
     lines = capsys.readouterr().out.splitlines()
     flag_lines = [line for line in lines if "stops_" in line]
     assert flag_lines == [f"flags            stops_sliding: {FLAG_MEANINGS['stops_sliding']}",
@@ -115,7 +118,8 @@ def test_height_table_explains_every_flag(fake_solver, capsys):
 
 
 def test_height_fast_tier_says_it_simulates_nothing(fake_solver, capsys):
-    assert main(["height", "--preset", "paper-quartz", "--tier", "fast"]) == 0
+    argv = ["height", "--preset", "paper-quartz", "--tier", "fast"]
+    assert main(argv, solver=fake_solver) == 0
     out = capsys.readouterr().out
     assert "reduced model (fast tier), no simulation" in out
     assert "evaluations" not in out and "wall time" not in out and "0 s" not in out
@@ -133,7 +137,8 @@ def test_every_documented_flag_has_one_meaning():
 
 
 def test_height_censored(fake_solver, capsys):
-    assert main(["height", "--preset", "paper-quartz", "--set", "mu=0", "--h-max", "100"]) == 0
+    argv = ["height", "--preset", "paper-quartz", "--set", "mu=0", "--h-max", "100"]
+    assert main(argv, solver=fake_solver) == 0
     out = capsys.readouterr().out
     assert "> 100 m" in out and "censored" in out
 
@@ -153,17 +158,19 @@ def test_height_bad_input_exits_2_with_one_line(fake_solver, capsys, sets, fragm
     argv = ["height", "--preset", "paper-quartz"]
     for item in sets:
         argv += ["--set", item]
-    assert main(argv) == 2
+    assert main(argv, solver=fake_solver) == 2
     captured = capsys.readouterr()
     assert fragment in captured.err
     assert "Traceback" not in captured.err and len(captured.err.strip().splitlines()) == 1
-    assert fake_solver == []  # the solver was never called
+    assert fake_solver.calls == []  # the solver was never called
 
 
 def test_height_bad_bounds_exit_2(fake_solver, capsys):
-    assert main(["height", "--preset", "paper-quartz", "--h-min", "10", "--h-max", "1"]) == 2
+    argv = ["height", "--preset", "paper-quartz", "--h-min", "10", "--h-max", "1"]
+    assert main(argv, solver=fake_solver) == 2
     assert "--h-max" in capsys.readouterr().err
-    assert main(["height", "--preset", "paper-quartz", "--h-min", "1 psi"]) == 2
+    argv = ["height", "--preset", "paper-quartz", "--h-min", "1 psi"]
+    assert main(argv, solver=fake_solver) == 2
     assert "--h-min" in capsys.readouterr().err
 
 

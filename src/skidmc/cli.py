@@ -189,13 +189,9 @@ def _cmd_height(args: argparse.Namespace) -> int:
     if len(bounds) == 2 and not bounds["h_min"] < bounds["h_max"]:
         raise SceneError("--h-max", args.h_max, f"must be above --h-min ({args.h_min})")
 
-    try:
+    critical_height = getattr(args, "solver", None)
+    if critical_height is None:
         from skidmc.solver import critical_height
-    except ModuleNotFoundError as exc:
-        if exc.name != "skidmc.solver":
-            raise
-        print("skidmc: error: the solver (skidmc.solver) is not installed", file=sys.stderr)
-        return 1
     result = critical_height(scene, rtol=args.rtol, tier=args.tier, **bounds)
 
     height_m = float(result.critical_height)
@@ -350,6 +346,7 @@ def _growing_study(args: argparse.Namespace) -> int | None:
     try:
         steps = run_until_stable(study, args.out, workers=args.workers,
                                  progress=False if args.quiet else None,
+                                 solver=getattr(args, "solver", None),
                                  log=lambda line: print(f"skidmc run: {line}", file=sys.stderr))
     except RunInterrupted as exc:
         print(f"skidmc run: interrupted; {exc.hint}", file=sys.stderr)
@@ -386,7 +383,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             args.study, args.out, n=args.n, workers=args.workers, scheduler=args.scheduler,
             resume=args.resume, force=getattr(args, "force", False),
             progress=False if args.quiet else None,
-            chunk_size=getattr(args, "chunk_size", None), command=" ".join(parts))
+            chunk_size=getattr(args, "chunk_size", None), command=" ".join(parts),
+            solver=getattr(args, "solver", None))
         lines = []
         if not args.quiet:
             if report.action == "up_to_date":
@@ -549,13 +547,17 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, *, solver=None) -> int:
     """Entry point of the ``skidmc`` console script.
 
     Parameters
     ----------
     argv : sequence of str, optional
         Arguments without the program name; ``sys.argv[1:]`` when None.
+    solver : callable, optional
+        Used instead of :func:`skidmc.solver.critical_height` by ``height`` and ``run`` (same
+        signature; for ``run`` it must pickle, i.e. be a module-level function): for tests and
+        for alternative solvers.
 
     Returns
     -------
@@ -564,6 +566,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         Usage errors exit with status 2 through :mod:`argparse` (``SystemExit``).
     """
     args = build_parser().parse_args(argv)
+    args.solver = solver
     try:
         return args.func(args)
     except SkidmcError as err:
