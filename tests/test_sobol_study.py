@@ -68,6 +68,10 @@ def test_growth_reuses_every_row_and_stops_when_stable(tmp_path):
         assert np.array_equal(a[name].values, b[name].values), name
     record = json.loads((tmp_path / "convergence.json").read_text())
     assert record["stable"] and [s["n"] for s in record["steps"]] == ns
+    # Run again: the complete file is the starting point, nothing is computed.
+    again = run_until_stable(study, tmp_path / "g.h5", workers=1, progress=False,
+                             solver=fake_height, resamples=200, log=lines.append)
+    assert [(s["n"], s["new_rows"]) for s in again] == [(ns[-1], 0)]
 
 
 def test_n_max_only_for_saltelli():

@@ -347,6 +347,7 @@ def _growing_study(args: argparse.Namespace) -> int | None:
         steps = run_until_stable(study, args.out, workers=args.workers,
                                  progress=False if args.quiet else None,
                                  solver=getattr(args, "solver", None),
+                                 force=bool(getattr(args, "force", False)),
                                  log=lambda line: print(f"skidmc run: {line}", file=sys.stderr))
     except RunInterrupted as exc:
         print(f"skidmc run: interrupted; {exc.hint}", file=sys.stderr)

@@ -59,6 +59,7 @@ def _stability(path: Path, threshold: float, half_width: float, resamples: int,
 
 def run_until_stable(study, out=None, *, workers: int | None = None, progress: bool | None = None,
                      solver: Callable | None = None, resamples: int = 1000, seed: int = 0,
+                     force: bool = False,
                      log: Callable[[str], None] = print) -> list[GrowthStep]:
     """Run a ``saltelli`` study, doubling N until its Sobol' indices are stable or N = n_max.
 
@@ -73,6 +74,9 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
         As :func:`skidmc.ensemble.run.execute_study`.
     resamples, seed : int
         Of the bootstrap intervals that the rule reads.
+    force : bool
+        Recompute from the study's N even where the result file already holds a complete run
+        of this study (by default such a run is the starting point: nothing is recomputed).
     log : callable
         Receives one line per step.
 
@@ -95,13 +99,20 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
     if path.suffix != ".h5":
         path = path / "ensemble.h5"
     n = design.n
+    info = inspect_file(path) if path.is_file() else None
+    if (not force and info and info.get("skidmc") and info["complete"]
+            and info.get("study_sha256") == study.sha256):
+        # A complete run of this study, at some N of the ladder: start from it.
+        while study.with_n(n).n_rows < info["n_rows"] and 2 * n <= design.n_max:
+            n *= 2
     steps: list[GrowthStep] = []
     previous_rows = 0
     while True:
         current = study.with_n(n)
         rows = current.n_rows
         info = inspect_file(path) if path.is_file() else None
-        if info and info.get("skidmc") and info["complete"] and info["n_rows"] == rows:
+        if (not force and info and info.get("skidmc") and info["complete"]
+                and info["n_rows"] == rows and info.get("study_sha256") == study.sha256):
             new_rows = 0  # this N is already computed (a rerun of the command)
         elif previous_rows:
             grown = path.with_name(path.stem + ".grow.h5")
@@ -131,6 +142,7 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
             log(f"not stable at N = {n}: n_max = {design.n_max} reached")
             break
         previous_rows, n = rows, 2 * n
+        force = False  # what this call computed is this study's own run
     record = {"threshold": design.stable_threshold, "half_width": design.stable_half_width,
               "n_max": design.n_max, "steps": steps, "stable": all(steps[-1]["stable"].values())}
     (path.parent / "convergence.json").write_text(json.dumps(record, indent=1) + "\n")
