@@ -66,6 +66,7 @@ __all__ = [
     "FAST_TIER_P90_ERROR",
     "HazardResult",
     "SurfaceEstimate",
+    "categorical_critical_height",
     "run_hazard_study",
 ]
 
@@ -409,6 +410,68 @@ def _elasticity(results: list[tuple[float, DropHeightResult]], drop) -> float:
         weighted += weight * float(r.contributions @ hazard)
         total += weight * float(r.contributions.sum())
     return weighted / total if total > 0 else math.nan
+
+
+def categorical_critical_height(study: HazardStudy, *, workers: int | None = 1,
+                                solver: Callable | None = None):
+    """H_c on all surfaces at once, the surface a categorical input (for the generic methods).
+
+    The inputs are: the surface's index (a discrete marginal with the surfaces' weights), the
+    friction's standard normal score (each surface maps it through its own friction
+    distribution), then the other aleatory inputs. The epistemic inputs stay at the scene's
+    values. This is the form the generic rare-event methods and a single-proposal structured
+    estimate need; :func:`run_hazard_study` stratifies by surface instead.
+
+    Parameters
+    ----------
+    study : HazardStudy
+    workers : int or None
+        As in :func:`run_hazard_study`.
+    solver : callable, optional
+        As in :func:`run_hazard_study`.
+
+    Returns
+    -------
+    critical_height : callable
+        X (n, d) -> H_c (n,) [m]; ``critical_height.runs`` and ``.failed`` count solver runs
+        and failures.
+    marginals : list
+        Frozen scipy distributions of the d inputs.
+    names : tuple of str
+        ``("surface", "mu_score", *study.aleatory_keys[1:])``.
+    """
+    if solver is None:
+        from skidmc.ensemble.batch import evaluate_batch as solver
+    keys = study.aleatory_keys
+    tally = _Tally()
+    heights = []
+    for surface in study.surfaces:
+        marginals = _marginals(study, surface, keys)
+        heights.append(_CriticalHeight(study, surface, keys, marginals, {}, solver, workers,
+                                       tally))
+    weights = np.array([s.weight for s in study.surfaces])
+    category = stats.rv_discrete(values=(np.arange(weights.size), weights))()
+    others = _marginals(study, study.surfaces[0], keys[1:])
+
+    def critical_height(x: np.ndarray) -> np.ndarray:
+        out = np.empty(x.shape[0])
+        index = np.rint(x[:, 0]).astype(int)
+        score = x[:, 1]
+        for k, (surface, h) in enumerate(zip(study.surfaces, heights)):
+            rows = index == k
+            if not rows.any():
+                continue
+            z = score[rows]
+            friction = _marginals(study, surface, ("mu",))[0]
+            mu = np.where(z > 0, friction.isf(stats.norm.sf(z)), friction.ppf(stats.norm.cdf(z)))
+            out[rows] = h(np.column_stack([mu, x[rows, 2:]]))
+        critical_height.runs = tally.runs
+        critical_height.failed = tally.failed
+        return out
+
+    critical_height.runs = 0
+    critical_height.failed = 0
+    return critical_height, [category, stats.norm(), *others], ("surface", "mu_score", *keys[1:])
 
 
 # --------------------------------------------------------------------------------------------
@@ -780,3 +843,32 @@ def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
     fig.savefig(paths[-1], dpi=100)
     plt.close(fig)
     return paths
+
+
+def main(argv=None) -> int:
+    """``python -m skidmc.analysis.handling STUDY [OUT_DIR] [--workers N]``: run and summarise.
+
+    OUT_DIR defaults to ``results/<study name>``. Prints the summary's first lines.
+    """
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m skidmc.analysis.handling",
+                                     description="Run a hazard study (skidmc.analysis.handling).")
+    parser.add_argument("study", help="hazard study file (TOML with a [hazard] table)")
+    parser.add_argument("out_dir", nargs="?", help="results folder (default results/<name>)")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="local worker processes (default 1: in this process)")
+    args = parser.parse_args(argv)
+    study = load_hazard_study(args.study)
+    out = Path(args.out_dir) if args.out_dir else Path("results") / study.name
+    result = run_hazard_study(study, out, workers=args.workers,
+                              progress=lambda line: print(line, flush=True))
+    lo, hi = result.interval
+    print(f"P = {result.probability:.3g} per accident, 95 % [{lo:.3g}, {hi:.3g}], "
+          f"epistemic 5-95 % [{result.band[0]:.3g}, {result.band[1]:.3g}]; "
+          f"{result.runs['total']} solver runs; written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
