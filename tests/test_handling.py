@@ -271,8 +271,9 @@ def test_skid_model_structured_agrees_with_brute_force_near_1e3():
 
     The shipped study at nominal kinetics with a median drop of 0.33 m gives P ~ 1e-3 (its
     fragility curve); 40,000 drops give ~40 reactions, a CoV of ~0.16. The structured estimate
-    (~1,300 runs, CoV ~0.05) and the brute force must agree within 3 combined standard errors
-    (a false alarm has odds 0.3 %).
+    and the brute force must agree within 3 combined standard errors (a false alarm has odds
+    0.3 %). Measured: structured 1.067e-3 (CoV 0.038, 1,299 runs), brute force 1.25e-3
+    (50 reactions in 40,000 drops, CoV 0.14): 1.0 combined standard error apart.
     """
     study = _shipped_without_epistemic("0.33 m")
     structured = run_hazard_study(study, None, workers=1)
@@ -288,6 +289,8 @@ def test_skid_model_structured_agrees_with_generic_methods_near_1e5(method):
     """Below brute force: the structured estimate against FORM-IS and subset simulation with
     H_drop and the surface (categorical) as inputs, g = H_c - H_drop. Median drop 0.1 m:
     P ~ 1.3e-5. Agreement within 3 combined standard errors (each method's own CoV).
+    Measured: structured 1.30e-5 (CoV 0.047, 1,313 runs); FORM-IS 9.7e-6 (CoV 0.19, 952 runs,
+    1.7 standard errors off); subset 1.58e-5 (CoV 0.24, 33,997 runs, 0.7 off).
     """
     study = _shipped_without_epistemic("0.1 m")
     structured = run_hazard_study(study, None, workers=1)

@@ -813,6 +813,8 @@ def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
                label="study median")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.set_xticks(m[::2], [f"{v:.3g}" for v in m[::2]])
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("median drop height [m]")
     ax.set_ylabel("P(reaction) per accident")
     ax.set_title(f"{r.name}: fragility")
