@@ -35,6 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from skidmc.ensemble.executors import default_workers  # noqa: E402 (after the sys.path set-up)
+from skidmc.ensemble.hazard_study import is_hazard_study  # noqa: E402 (after the sys.path set-up)
 from skidmc.ensemble.run import execute_study  # noqa: E402 (after the sys.path set-up)
 from skidmc.ensemble.study import load_study  # noqa: E402 (after the sys.path set-up)
 
@@ -236,7 +237,8 @@ def main(argv=None) -> None:
     parser.add_argument("--memory-n", type=int, nargs="+", default=[1000, 4000, 16000],
                         help="sample counts of the memory probe")
     args = parser.parse_args(argv)
-    studies = sorted((ROOT / "studies").glob("*.toml"))
+    studies = sorted(p for p in (ROOT / "studies").glob("*.toml")
+                     if not is_hazard_study(p))  # hazard studies are benchmarks/hazard.py's
     worker_counts = sorted({1, default_workers()})
     _warm_up()
     load = os.getloadavg()

@@ -390,3 +390,22 @@ def test_report_confidence_must_be_a_probability():
     with pytest.raises(SystemExit) as info:
         main(["report", "x.h5", "--confidence", "95"])
     assert info.value.code == 2
+
+
+# --- hazard studies through skidmc run / report -------------------------------------------------
+
+
+def test_run_dispatches_hazard_studies_and_reports_their_errors(tmp_path, capsys):
+    text = (ROOT / "studies" / "hazard-handling.toml").read_text()
+    bad = tmp_path / "bad-hazard.toml"
+    bad.write_text(text.replace('material = "concrete"', 'material = "concrete-x"', 1))
+    assert main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "skidmc run: error:" in err and "concrete-x" in err
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+
+
+def test_report_of_a_hazard_study_shows_its_summary(capsys):
+    assert main(["report", str(ROOT / "studies" / "hazard-handling.toml")]) == 0
+    out = capsys.readouterr().out
+    assert "per accident" in out and out.strip().endswith("results/hazard-handling/summary.md")

@@ -280,3 +280,25 @@ def test_interval_coverage_over_seeds(method, probability):
     spread = 3.0 * math.sqrt(0.95 * 0.05 / runs)  # 3 binomial standard deviations
     print(f"structured {method} at {probability}: coverage {coverage:.3f} over {runs} seeds")
     assert 0.95 - spread <= coverage <= 0.95 + spread
+
+
+def test_log_weights_reweight_the_same_samples_to_another_drop_height():
+    # The proposal on x does not involve the drop height, so the samples of one run give P for
+    # another drop-height median: ln H_drop ~ N(ln f, 0.5^2) shifts the closed form to
+    # Phi(-(m - ln f) / s). f = 2 raises P from 1e-6 to about 8e-6; the reweighted estimate
+    # carries its own sample CoV, and its 95 % interval (+- 1.96 SE) must cover the exact value.
+    critical_height = synthetic_critical_height(1e-6)
+    result = drop_height_probability(critical_height, MARGINALS, DROP_HEIGHT, CORRELATION)
+    assert result.log_weights.shape == result.critical_heights.shape
+    same = np.exp(result.log_weights + DROP_HEIGHT.logsf(result.critical_heights))
+    assert same.mean() == pytest.approx(result.probability, rel=1e-12)
+    factor = 2.0
+    other = stats.lognorm(DROP_LOG_SD, scale=factor)
+    terms = np.exp(result.log_weights + other.logsf(result.critical_heights))
+    estimate, error = terms.mean(), terms.std(ddof=1) / math.sqrt(terms.size)
+    median_log = stats.norm.isf(1e-6) * total_log_sd()
+    exact = stats.norm.sf((median_log - math.log(factor)) / total_log_sd())
+    assert abs(estimate - exact) <= 1.96 * error
+    mc = drop_height_probability(critical_height, MARGINALS, DROP_HEIGHT, CORRELATION,
+                                 method="mc", max_evaluations=2000)
+    np.testing.assert_array_equal(mc.log_weights, 0.0)

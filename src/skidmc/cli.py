@@ -328,6 +328,34 @@ def _scene_summary_lines(path) -> list[str]:
     return lines
 
 
+def _hazard_study(args: argparse.Namespace) -> int | None:
+    """A hazard study (``[hazard]`` table): the probability per handling accident (exit
+    status), or None for any other file."""
+    from pathlib import Path
+
+    from skidmc.ensemble.hazard_study import is_hazard_study, load_hazard_study
+
+    if not Path(args.study).is_file() or not is_hazard_study(args.study):
+        return None
+    from skidmc.analysis.handling import run_hazard_study
+
+    try:
+        study = load_hazard_study(args.study)
+        out = Path(args.out) if args.out else Path("results") / study.name
+        result = run_hazard_study(
+            study, out, workers=args.workers,
+            progress=None if args.quiet else (lambda line: print(line, file=sys.stderr)))
+    except SkidmcError as exc:
+        print(f"skidmc run: error: {exc}", file=sys.stderr)
+        return 2
+    low, high = result.interval
+    print(f"skidmc run: P(reaction per accident) = {result.probability:.3g} "
+          f"[{low:.3g}, {high:.3g}] (95 %), {result.runs} solver runs; {out / 'summary.md'}",
+          file=sys.stderr)
+    print(out / "summary.md")
+    return 0
+
+
 def _growing_study(args: argparse.Namespace) -> int | None:
     """A saltelli study with ``n_max``: grow N until its Sobol' indices are stable (exit
     status), or None for any other study (including one that does not load: the run reports
@@ -379,6 +407,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     growth = _growing_study(args)
     if growth is not None:
         return growth
+    hazard = _hazard_study(args)
+    if hazard is not None:
+        return hazard
     try:
         report = execute_study(
             args.study, args.out, n=args.n, workers=args.workers, scheduler=args.scheduler,
@@ -453,6 +484,18 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from skidmc.analysis.report import write_report
 
     target = Path(args.target)
+    if target.suffix == ".toml" and target.is_file():
+        from skidmc.ensemble.hazard_study import is_hazard_study, load_hazard_study
+
+        if is_hazard_study(target):
+            summary = Path("results") / load_hazard_study(target).name / "summary.md"
+            if not summary.is_file():
+                print(f"skidmc report: error: {target}: no result yet at {summary}; run it "
+                      f"first: skidmc run {target}", file=sys.stderr)
+                return 2
+            print(summary.read_text(), end="")  # written by the run itself
+            print(summary)
+            return 0
     if target.suffix == ".toml":
         from skidmc.ensemble.storage import default_path
         from skidmc.ensemble.study import load_study

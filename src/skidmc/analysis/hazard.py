@@ -95,6 +95,11 @@ class DropHeightResult:
         pulls each input from its median; a measure of input importance.
     warnings : tuple of str
         Caveats (mode search trouble); each is also issued as a RuntimeWarning.
+    log_weights : (n,) numpy.ndarray
+        Natural log of each sample's importance weight phi(u) / q(u) (0 for ``"mc"``). With
+        them the same samples give the probability for any other drop-height distribution,
+        ``mean(exp(log_weights + other.logsf(critical_heights)))``: the proposal on x does not
+        depend on the drop height.
     """
 
     probability: float
@@ -114,6 +119,7 @@ class DropHeightResult:
     posterior_mean: np.ndarray
     posterior_mean_standard: np.ndarray
     warnings: tuple[str, ...] = ()
+    log_weights: np.ndarray | None = None
 
     def probability_by(self, labels) -> dict[Hashable, Share]:
         """Split the probability by a label of each sample (e.g. a categorical input).
@@ -336,7 +342,7 @@ def drop_height_probability(
             centre, centre_height = np.zeros(d), float(origin_height[0])
     search_cost = model.evaluations
 
-    all_u, all_x, all_heights, all_terms = [], [], [], []
+    all_u, all_x, all_heights, all_terms, all_log_weights = [], [], [], [], []
     history = []
     converged = False
     while model.evaluations < max_evaluations:
@@ -350,6 +356,7 @@ def drop_height_probability(
         all_x.append(x)
         all_heights.append(heights)
         all_terms.append(terms)
+        all_log_weights.append(log_weight)
         values = np.concatenate(all_terms)
         probability = float(values.mean())
         error = float(values.std(ddof=1) / math.sqrt(values.size)) if values.size > 1 else math.inf
@@ -413,4 +420,5 @@ def drop_height_probability(
         posterior_mean=posterior_mean,
         posterior_mean_standard=posterior_mean_standard,
         warnings=tuple(notes),
+        log_weights=np.concatenate(all_log_weights),
     )

@@ -1,0 +1,876 @@
+"""The handling hazard: probability per accident that a dropped billet reacts, on the skid model.
+
+:func:`run_hazard_study` runs a hazard study (:mod:`skidmc.ensemble.hazard_study`). An accident
+reacts when its drop height reaches the critical height of its scene, H_drop >= H_c(x); H_c
+comes from the solver through :func:`skidmc.ensemble.batch.evaluate_batch`, one batched call
+per request of the estimator. The drop height integrates out exactly
+(:func:`skidmc.analysis.hazard.drop_height_probability`), and so does the surface: it is a
+categorical input with a handful of values, so the probability is the weighted sum over
+surfaces of P(reaction | surface), each estimated on its own (stratification). Each surface
+then gets its own importance-sampling proposal, centred on its own most likely initiating
+combination; one proposal for all surfaces holds the category fixed at one surface and samples
+the others where their reactions are not (``docs/rare-events.md``, validity).
+
+Three layers of estimate:
+
+* **pooled**: aleatory and epistemic inputs sampled together, P = E_theta E_x[S_drop(H_c)]:
+  the probability per accident with the epistemic uncertainty averaged in, its 95 % interval
+  (normal approximation of the strata's sum), the per-surface split (each surface's share sums
+  to the total exactly), the design point, and the importance of each input (E[U | reaction],
+  the posterior mean of each input's normal score: how many standard deviations a reaction
+  pulls it from its median).
+* **epistemic band**: the epistemic inputs drawn (Latin hypercube) and held fixed, P(theta_j)
+  estimated for each; the 5-95 % quantiles of P(theta_j) are the band.
+* **fragility curve**: P against the median drop height. The estimator's proposal on x does not
+  involve the drop height, so the same H_c samples give P for any drop-height distribution,
+  mean(w_i S'(H_c,i)) with the samples' importance weights w_i: the curve costs no solver run.
+
+Solver outcomes: ``censored_above`` (no reaction up to h_max) is H_c = inf; ``censored_below``
+is H_c = 0 (reacts at any height: conservative by at most P(H_drop < h_min)); ``failed`` is
+counted, its reasons kept, taken as no reaction (H_c = inf) in the estimate, and bounded: the
+result also states how much P would rise if every failed sample had reacted. Samples are clipped
+to their distributions' 1e-9 and 1 - 1e-9 quantiles (:data:`~skidmc.ensemble.study_model.
+U_TAIL`, where the study file's supports were checked), as a study's design is.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+import warnings
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+from scipy.stats import qmc
+
+from skidmc.analysis.hazard import DropHeightResult, drop_height_probability
+from skidmc.analysis.rare_events import CONFIDENCE, GaussianCopulaTransform
+from skidmc.ensemble.hazard_study import HazardStudy, Surface, load_hazard_study
+from skidmc.ensemble.study_model import (
+    EXTRA_KEYS,
+    RATE_AT_REFERENCE,
+    U_TAIL,
+    Distribution,
+    StudyScene,
+)
+from skidmc.scene import SI_UNITS
+from skidmc.scene.units import from_si
+
+__all__ = [
+    "BAND",
+    "FRAGILITY_FACTORS",
+    "FAST_TIER_P90_ERROR",
+    "HazardResult",
+    "SurfaceEstimate",
+    "categorical_critical_height",
+    "run_hazard_study",
+]
+
+#: Quantiles of the epistemic band of P [1].
+BAND = (0.05, 0.95)
+
+#: Factors on the study's median drop height at which the fragility curve is given [1].
+FRAGILITY_FACTORS = tuple(float(f) for f in np.geomspace(0.25, 4.0, 9))
+
+#: The fast tier's 90th-percentile relative error on H_c against the full model
+#: (results/benchmarks/fast_tier.md, 341 scenes): what a study run on the fast tier carries.
+FAST_TIER_P90_ERROR = 0.045
+
+# Display units of the summary (SI inside).
+_DISPLAY_UNITS = {"flow_stress": "psi", "billet_mass": "lb", "billet_diameter": "in",
+                  "drop_height": "m", "kinetics.heat_of_reaction": "cal/g"}
+_Z = float(stats.norm.isf((1 - CONFIDENCE) / 2))
+_MAX_REASONS = 10
+
+
+@dataclasses.dataclass(frozen=True)
+class SurfaceEstimate:
+    """The pooled estimate on one surface.
+
+    Attributes
+    ----------
+    material : str
+    weight : float
+        Share of accidents on this surface [1].
+    conditional : float
+        P(reaction | this surface) [1].
+    share : float
+        weight x conditional: this surface's part of the probability per accident [1].
+    cov : float
+        Coefficient of variation of `conditional` (and of `share`) [1].
+    interval : tuple of float
+        95 % interval of `share` [1].
+    runs : int
+        Solver runs of the estimate (mode search included).
+    converged : bool
+        Whether the target CoV was reached within the budget.
+    design_point : dict
+        Input -> value [SI] at the mode of S_drop(H_c(x)) phi(u) on this surface.
+    design_critical_height : float
+        H_c at the design point [m].
+    design_log_density : float
+        ln(weight S_drop(H_c) phi(u)) at the design point, up to a constant shared by all
+        surfaces: the largest is the most likely initiating combination overall.
+    importance : dict
+        Input -> E[U | reaction] on this surface [standard deviations].
+    failed : int
+        Samples the solver failed on (taken as no reaction).
+    failed_bound : float
+        How much `share` would rise if every failed sample had reacted [1].
+    """
+
+    material: str
+    weight: float
+    conditional: float
+    share: float
+    cov: float
+    interval: tuple[float, float]
+    runs: int
+    converged: bool
+    design_point: dict[str, float]
+    design_critical_height: float
+    design_log_density: float
+    importance: dict[str, float]
+    failed: int
+    failed_bound: float
+
+
+@dataclasses.dataclass(frozen=True)
+class HazardResult:
+    """What :func:`run_hazard_study` found (also written to ``summary.json``).
+
+    Attributes
+    ----------
+    name : str
+        The study's name.
+    probability : float
+        Probability of a reaction per accident, epistemic inputs averaged in (pooled) [1].
+    cov : float
+        Its coefficient of variation [1].
+    interval : tuple of float
+        Its 95 % interval (normal approximation of the sum over surfaces) [1].
+    surfaces : tuple of SurfaceEstimate
+        The pooled estimate per surface; the shares sum to `probability`.
+    epistemic_probabilities : numpy.ndarray
+        P at each epistemic draw (empty without an epistemic loop) [1].
+    epistemic_covs : numpy.ndarray
+        CoV of each draw's P [1].
+    epistemic_draws : dict
+        Epistemic input -> its value at each draw [SI].
+    band : tuple of float
+        5 % and 95 % quantiles of `epistemic_probabilities` (NaN without draws) [1].
+    design_point : dict
+        Input -> value [SI] of the most likely initiating combination (with ``"surface"``, the
+        material, and ``"critical_height"``, the height it reacts from [m]).
+    importance : dict
+        Input -> E[U | reaction] [standard deviations], share-weighted over the surfaces.
+    fragility : dict
+        ``median`` [m], ``probability``, ``cov``, ``band_low``, ``band_high`` [1], lists over
+        :data:`FRAGILITY_FACTORS` times the study's median drop height.
+    runs : dict
+        Solver runs: ``pooled``, ``epistemic``, ``total``.
+    failed : int
+        Solver failures in all estimates (taken as no reaction).
+    failure_reasons : tuple of str
+        Up to 10 distinct failure reasons.
+    elasticity : float
+        -d ln P / d ln H_c: a relative error e in every H_c moves P by about elasticity x e [1].
+    notes : tuple of str
+        Caveats in words (tier, budget, failures).
+    wall_time : float
+        Seconds the run took [s].
+    files : tuple of str
+        Files written.
+    """
+
+    name: str
+    probability: float
+    cov: float
+    interval: tuple[float, float]
+    surfaces: tuple[SurfaceEstimate, ...]
+    epistemic_probabilities: np.ndarray
+    epistemic_covs: np.ndarray
+    epistemic_draws: dict[str, np.ndarray]
+    band: tuple[float, float]
+    design_point: dict[str, object]
+    importance: dict[str, float]
+    fragility: dict[str, list[float]]
+    runs: dict[str, int]
+    failed: int
+    failure_reasons: tuple[str, ...]
+    elasticity: float
+    notes: tuple[str, ...]
+    wall_time: float
+    files: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict:
+        """Plain JSON-ready data (arrays as lists)."""
+        out = dataclasses.asdict(self)
+        out["surfaces"] = [dataclasses.asdict(s) for s in self.surfaces]
+        out["epistemic_probabilities"] = self.epistemic_probabilities.tolist()
+        out["epistemic_covs"] = self.epistemic_covs.tolist()
+        out["epistemic_draws"] = {k: np.asarray(v).tolist()
+                                  for k, v in self.epistemic_draws.items()}
+        return _plain(out)
+
+
+# --------------------------------------------------------------------------------------------
+# the limit state on one surface
+# --------------------------------------------------------------------------------------------
+
+
+class _Tally:
+    """Solver runs, failures and their reasons, over every estimate of a run."""
+
+    def __init__(self) -> None:
+        self.runs = 0
+        self.failed = 0
+        self.censored_above = 0
+        self.reasons: list[str] = []
+
+    def add_reasons(self, reasons) -> None:
+        for reason in reasons:
+            if reason not in self.reasons and len(self.reasons) < _MAX_REASONS:
+                self.reasons.append(str(reason))
+
+
+def _physical(d: Distribution, nominal: float):
+    """The frozen distribution of d's values [SI]: a relative one scaled by `nominal`."""
+    if not d.relative:
+        return d.frozen
+    params = dict(d.params)
+    params["loc"] = params.get("loc", 0.0) * nominal
+    params["scale"] = params.get("scale", 1.0) * nominal
+    return getattr(stats, d.name)(**params)
+
+
+class _CriticalHeight:
+    """H_c(X) [m] on one surface: X's columns are `keys` [SI], `fixed` fills in the rest.
+
+    Calls the solver (evaluate_batch's signature) once per call, maps its statuses to heights,
+    counts runs and failures in `tally`, and remembers the failed rows (for the bound).
+    """
+
+    def __init__(self, study: HazardStudy, surface: Surface, keys: tuple[str, ...],
+                 marginals: list, fixed: Mapping[str, float], solver: Callable, workers,
+                 tally: _Tally) -> None:
+        self.study = study
+        self.surface = surface
+        self.keys = keys
+        self.fixed = dict(fixed)
+        self.solver = solver
+        self.workers = workers
+        self.tally = tally
+        self.low = np.array([m.ppf(U_TAIL) for m in marginals])
+        self.high = np.array([m.isf(U_TAIL) for m in marginals])
+        self.failed_rows: set[bytes] = set()
+        self.runs = 0
+        self.failed = 0
+
+    def columns(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        """Scene columns [SI] of the rows of x (the rate at T_ref turned into a prefactor)."""
+        n = x.shape[0]
+        values = {k: np.full(n, v, dtype=float) for k, v in self.fixed.items()}
+        values.update({k: np.ascontiguousarray(x[:, j], dtype=float)
+                       for j, k in enumerate(self.keys)})
+        rate = values.pop(RATE_AT_REFERENCE, None)
+        if rate is not None:
+            t_ref = self.study.epistemic[RATE_AT_REFERENCE].reference_temperature
+            t_act = values.get("kinetics.activation_temperature",
+                               np.full(n, self.surface.scene.kinetics_activation_temperature))
+            values["kinetics.prefactor"] = rate * np.exp(t_act / t_ref)
+        return values
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        x = np.clip(x, self.low, self.high)
+        res = self.solver(self.columns(x), self.study.solver, base=self.surface.scene,
+                          workers=self.workers)
+        status = np.asarray(res.status).astype(str)
+        heights = np.asarray(res.critical_height, dtype=float)
+        if status.shape != (x.shape[0],) or heights.shape != (x.shape[0],):
+            raise ValueError(f"solver = {self.solver!r}: returned {status.shape[0]} statuses "
+                             f"and {heights.shape[0]} heights for {x.shape[0]} scenes")
+        out = np.where(status == "ok", heights, np.inf)
+        out[status == "censored_below"] = 0.0
+        failed = ~np.isin(status, ("ok", "censored_above", "censored_below"))
+        bad_height = (status == "ok") & ~(np.isfinite(heights) & (heights >= 0))
+        failed |= bad_height
+        out[failed] = np.inf
+        n_failed = int(failed.sum())
+        self.runs += x.shape[0]
+        self.failed += n_failed
+        self.tally.runs += x.shape[0]
+        self.tally.failed += n_failed
+        self.tally.censored_above += int((status == "censored_above").sum())
+        if n_failed:
+            reasons = np.asarray(getattr(res, "failure_reason", [""] * x.shape[0]), dtype=object)
+            self.tally.add_reasons(r or "non-finite or negative height"
+                                   for r in reasons[failed])
+            self.failed_rows.update(row.tobytes() for row in x[failed])
+        return out
+
+
+def _nominal(study: HazardStudy, surface: Surface, key: str) -> float:
+    sc = StudyScene(name=surface.material, scene=surface.scene,
+                    uncertain={**study.billet, **study.epistemic})
+    return sc.nominal(key)
+
+
+def _marginals(study: HazardStudy, surface: Surface, keys: tuple[str, ...]) -> list:
+    out = []
+    for key in keys:
+        if key == "mu":
+            d = surface.friction
+        elif key == "angle":
+            d = study.angle
+        else:
+            d = study.billet.get(key) or study.epistemic[key]
+        out.append(_physical(d, _nominal(study, surface, key) if d.relative else 1.0))
+    return out
+
+
+@dataclasses.dataclass
+class _Estimate:
+    """One call of the structured estimator on one surface, with its limit state."""
+
+    surface: Surface
+    keys: tuple[str, ...]
+    marginals: list
+    result: DropHeightResult
+    limit_state: _CriticalHeight
+    notes: tuple[str, ...]
+
+
+def _estimate(study, surface, keys, fixed, target_cov, seed, solver, workers, tally):
+    marginals = _marginals(study, surface, keys)
+    limit_state = _CriticalHeight(study, surface, keys, marginals, fixed, solver, workers, tally)
+    # The forward-difference step of the mode search: the solver's tolerance makes ln H_c noisy
+    # by ~rtol, which a step of 0.01 would turn into O(1) gradient noise; 10 rtol keeps it
+    # at ~0.1 of the gradient (docs/rare-events.md).
+    step = float(min(0.3, max(0.01, 10.0 * study.solver.rtol)))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        result = drop_height_probability(
+            limit_state, marginals, study.drop_height.frozen, method=study.estimator.method,
+            target_cov=target_cov, max_evaluations=study.estimator.max_runs, seed=seed,
+            gradient_step=step)
+    notes = tuple(f"{surface.material}: {w.message}" for w in caught)
+    return _Estimate(surface, keys, marginals, result, limit_state, notes)
+
+
+def _failed_bound(est: _Estimate) -> float:
+    """P(reaction | surface) added if every failed sample of the estimate had reacted."""
+    if not est.limit_state.failed_rows:
+        return 0.0
+    x = np.clip(est.result.samples, est.limit_state.low, est.limit_state.high)
+    failed = np.array([row.tobytes() in est.limit_state.failed_rows for row in x])
+    return float(np.exp(est.result.log_weights[failed]).sum() / x.shape[0])
+
+
+def _design_log_density(est: _Estimate) -> float:
+    u = GaussianCopulaTransform(est.marginals).to_standard(est.result.design_point)[0]
+    drop = est.limit_state.study.drop_height.frozen
+    with np.errstate(divide="ignore"):
+        log_s = float(drop.logsf(est.result.design_critical_height))
+    return math.log(est.surface.weight) + log_s - 0.5 * float(u @ u)
+
+
+def _scaled_drop(d: Distribution, factor: float):
+    """d's drop-height distribution scaled by `factor` (its median times factor)."""
+    params = dict(d.params)
+    params["loc"] = params.get("loc", 0.0) * factor
+    params["scale"] = params.get("scale", 1.0) * factor
+    return getattr(stats, d.name)(**params)
+
+
+def _reweighted(results: list[tuple[float, DropHeightResult]], drop) -> tuple[float, float]:
+    """sum_s w_s P_s and its standard error, for another drop-height distribution."""
+    total, variance = 0.0, 0.0
+    for weight, r in results:
+        with np.errstate(divide="ignore"):
+            terms = np.exp(r.log_weights + drop.logsf(r.critical_heights))
+        total += weight * float(terms.mean())
+        variance += weight**2 * float(terms.var(ddof=1)) / terms.size
+    return total, math.sqrt(variance)
+
+
+def _elasticity(results: list[tuple[float, DropHeightResult]], drop) -> float:
+    """-d ln P / d ln H_c, the contribution-weighted H f(H) / S(H) of the drop height."""
+    total, weighted = 0.0, 0.0
+    for weight, r in results:
+        h = r.critical_heights
+        ok = np.isfinite(h) & (h > 0) & (r.contributions > 0)
+        hazard = np.zeros_like(h)
+        with np.errstate(divide="ignore", over="ignore"):
+            hazard[ok] = np.exp(np.log(h[ok]) + drop.logpdf(h[ok]) - drop.logsf(h[ok]))
+        weighted += weight * float(r.contributions @ hazard)
+        total += weight * float(r.contributions.sum())
+    return weighted / total if total > 0 else math.nan
+
+
+def categorical_critical_height(study: HazardStudy, *, workers: int | None = 1,
+                                solver: Callable | None = None):
+    """H_c on all surfaces at once, the surface a categorical input (for the generic methods).
+
+    The inputs are: the surface's index (a discrete marginal with the surfaces' weights), the
+    friction's standard normal score (each surface maps it through its own friction
+    distribution), then the other aleatory inputs. The epistemic inputs stay at the scene's
+    values. This is the form the generic rare-event methods and a single-proposal structured
+    estimate need; :func:`run_hazard_study` stratifies by surface instead.
+
+    Parameters
+    ----------
+    study : HazardStudy
+    workers : int or None
+        As in :func:`run_hazard_study`.
+    solver : callable, optional
+        As in :func:`run_hazard_study`.
+
+    Returns
+    -------
+    critical_height : callable
+        X (n, d) -> H_c (n,) [m]; ``critical_height.runs`` and ``.failed`` count solver runs
+        and failures.
+    marginals : list
+        Frozen scipy distributions of the d inputs.
+    names : tuple of str
+        ``("surface", "mu_score", *study.aleatory_keys[1:])``.
+    """
+    if solver is None:
+        from skidmc.ensemble.batch import evaluate_batch as solver
+    keys = study.aleatory_keys
+    tally = _Tally()
+    heights = []
+    for surface in study.surfaces:
+        marginals = _marginals(study, surface, keys)
+        heights.append(_CriticalHeight(study, surface, keys, marginals, {}, solver, workers,
+                                       tally))
+    weights = np.array([s.weight for s in study.surfaces])
+    category = stats.rv_discrete(values=(np.arange(weights.size), weights))()
+    others = _marginals(study, study.surfaces[0], keys[1:])
+
+    def critical_height(x: np.ndarray) -> np.ndarray:
+        out = np.empty(x.shape[0])
+        index = np.rint(x[:, 0]).astype(int)
+        score = x[:, 1]
+        for k, (surface, h) in enumerate(zip(study.surfaces, heights)):
+            rows = index == k
+            if not rows.any():
+                continue
+            z = score[rows]
+            friction = _marginals(study, surface, ("mu",))[0]
+            mu = np.where(z > 0, friction.isf(stats.norm.sf(z)), friction.ppf(stats.norm.cdf(z)))
+            out[rows] = h(np.column_stack([mu, x[rows, 2:]]))
+        critical_height.runs = tally.runs
+        critical_height.failed = tally.failed
+        return out
+
+    critical_height.runs = 0
+    critical_height.failed = 0
+    return critical_height, [category, stats.norm(), *others], ("surface", "mu_score", *keys[1:])
+
+
+# --------------------------------------------------------------------------------------------
+# the run
+# --------------------------------------------------------------------------------------------
+
+
+def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None, *,
+                     workers: int | None = None, solver: Callable | None = None,
+                     progress: Callable[[str], None] | None = None) -> HazardResult:
+    """Probability per accident that a handling drop reacts, with its intervals and drivers.
+
+    Parameters
+    ----------
+    study : HazardStudy, str or Path
+        A validated study or the path of a hazard study file
+        (:func:`skidmc.ensemble.hazard_study.load_hazard_study`).
+    out_dir : str, Path or None
+        Folder for ``summary.md``, ``summary.json``, ``fragility.csv``, ``fragility.png`` and
+        ``importance.png`` (created); None writes nothing.
+    workers : int or None
+        Local worker processes of :func:`skidmc.ensemble.batch.evaluate_batch` (None: all
+        CPUs, 1: in this process).
+    solver : callable, optional
+        Stand-in for :func:`~skidmc.ensemble.batch.evaluate_batch`, with its signature
+        ``solver(columns, solver_options, base=scene, workers=workers)`` and a result with
+        ``critical_height`` [m], ``status`` (``ok``, ``censored_above``, ``censored_below``,
+        ``failed``) and ``failure_reason`` arrays; for tests and cheaper models.
+    progress : callable, optional
+        Called with a line of text after each estimate.
+
+    Returns
+    -------
+    HazardResult
+
+    Raises
+    ------
+    StudyError
+        `study` is a path to an invalid study file.
+    """
+    started = time.perf_counter()
+    if not isinstance(study, HazardStudy):
+        study = load_hazard_study(study)
+    if solver is None:
+        from skidmc.ensemble.batch import evaluate_batch as solver
+    say = progress or (lambda _line: None)
+    options = study.estimator
+    tally = _Tally()
+    seeds = np.random.SeedSequence(options.seed)
+    pooled_seeds, outer_seeds, design_seed = seeds.spawn(3)
+    notes: list[str] = []
+
+    # pooled: aleatory and epistemic inputs together, one estimate per surface
+    keys = (*study.aleatory_keys, *study.epistemic_keys)
+    pooled: list[_Estimate] = []
+    for surface, child in zip(study.surfaces, pooled_seeds.spawn(len(study.surfaces))):
+        est = _estimate(study, surface, keys, {}, options.target_cov,
+                        int(child.generate_state(1)[0]), solver, workers, tally)
+        pooled.append(est)
+        notes += est.notes
+        say(f"pooled {surface.material}: P(reaction | surface) = {est.result.probability:.3g} "
+            f"(CoV {est.result.cov:.2f}, {est.result.evaluations} runs)")
+    pooled_runs = tally.runs
+
+    surfaces = tuple(_surface_estimate(est) for est in pooled)
+    probability = math.fsum(s.share for s in surfaces)
+    error = math.sqrt(math.fsum((s.share * s.cov) ** 2 for s in surfaces
+                                if math.isfinite(s.cov)))
+    if any(not math.isfinite(s.cov) and s.share > 0 for s in surfaces):
+        error = math.inf
+    cov = error / probability if probability > 0 else math.inf
+    interval = (max(0.0, probability - _Z * error), min(1.0, probability + _Z * error))
+
+    # epistemic loop: the epistemic inputs drawn and held, one estimate per surface per draw
+    draws: dict[str, np.ndarray] = {}
+    outer: list[list[tuple[float, DropHeightResult]]] = []
+    outer_p, outer_cov = [], []
+    if study.epistemic and options.epistemic_draws:
+        draws = _epistemic_draws(study, options.epistemic_draws, design_seed)
+        for j, child in enumerate(outer_seeds.spawn(options.epistemic_draws)):
+            fixed = {k: float(v[j]) for k, v in draws.items()}
+            parts, variance = [], 0.0
+            for surface, grandchild in zip(study.surfaces, child.spawn(len(study.surfaces))):
+                est = _estimate(study, surface, study.aleatory_keys, fixed,
+                                options.epistemic_target_cov,
+                                int(grandchild.generate_state(1)[0]), solver, workers, tally)
+                notes += [f"draw {j}: {n}" for n in est.notes]
+                parts.append((surface.weight, est.result))
+                variance += (surface.weight * est.result.probability * est.result.cov) ** 2 \
+                    if est.result.probability > 0 else 0.0
+            p_j = math.fsum(w * r.probability for w, r in parts)
+            outer.append(parts)
+            outer_p.append(p_j)
+            outer_cov.append(math.sqrt(variance) / p_j if p_j > 0 else math.inf)
+            say(f"epistemic draw {j + 1}/{options.epistemic_draws}: P = {p_j:.3g}")
+    outer_p_arr = np.array(outer_p)
+    band = ((float(np.quantile(outer_p_arr, BAND[0])), float(np.quantile(outer_p_arr, BAND[1])))
+            if outer_p else (math.nan, math.nan))
+
+    # design point, importance, fragility, tolerance
+    best = max(surfaces, key=lambda s: s.design_log_density)
+    design: dict[str, object] = {"surface": best.material, **best.design_point,
+                                 "critical_height": best.design_critical_height}
+    importance = {k: math.fsum(s.share * s.importance[k] for s in surfaces) / probability
+                  if probability > 0 else math.nan for k in keys}
+    fragility = _fragility(study, pooled, outer)
+    strata = [(e.surface.weight, e.result) for e in pooled]
+    elasticity = _elasticity(strata, study.drop_height.frozen)
+
+    if study.solver.tier == "fast":
+        notes.append(f"fast tier: its measured error on H_c (p90 {FAST_TIER_P90_ERROR:.1%}, "
+                     "results/benchmarks/fast_tier.md) moves P by about "
+                     f"{elasticity * FAST_TIER_P90_ERROR:.0%} (elasticity {elasticity:.1f})")
+    for s in surfaces:
+        if not s.converged:
+            notes.append(f"{s.material}: run budget spent before the target CoV "
+                         f"({s.cov:.2f} > {options.target_cov})")
+    if tally.failed:
+        notes.append(f"{tally.failed} solver runs failed (taken as no reaction); had every "
+                     "failed sample of the pooled estimate reacted, P would rise by "
+                     f"{sum(s.failed_bound for s in surfaces):.3g}")
+    result = HazardResult(
+        name=study.name, probability=probability, cov=cov, interval=interval,
+        surfaces=surfaces, epistemic_probabilities=outer_p_arr,
+        epistemic_covs=np.array(outer_cov), epistemic_draws=draws, band=band,
+        design_point=design, importance=importance, fragility=fragility,
+        runs={"pooled": pooled_runs, "epistemic": tally.runs - pooled_runs,
+              "total": tally.runs},
+        failed=tally.failed, failure_reasons=tuple(tally.reasons), elasticity=elasticity,
+        notes=tuple(dict.fromkeys(notes)), wall_time=time.perf_counter() - started,
+    )
+    if out_dir is not None:
+        files = _write(result, study, Path(out_dir))
+        result = dataclasses.replace(result, files=tuple(str(f) for f in files))
+    return result
+
+
+def _surface_estimate(est: _Estimate) -> SurfaceEstimate:
+    r = est.result
+    w = est.surface.weight
+    return SurfaceEstimate(
+        material=est.surface.material, weight=w, conditional=r.probability,
+        share=w * r.probability, cov=r.cov, interval=(w * r.interval[0], w * r.interval[1]),
+        runs=r.evaluations, converged=r.converged,
+        design_point={k: float(v) for k, v in zip(est.keys, r.design_point)},
+        design_critical_height=float(r.design_critical_height),
+        design_log_density=_design_log_density(est),
+        importance={k: float(v) for k, v in zip(est.keys, r.posterior_mean_standard)},
+        failed=est.limit_state.failed, failed_bound=w * _failed_bound(est),
+    )
+
+
+def _epistemic_draws(study: HazardStudy, n: int, seed: np.random.SeedSequence):
+    """Latin-hypercube draws of the epistemic inputs [SI], each from its own distribution."""
+    keys = study.epistemic_keys
+    points = qmc.LatinHypercube(d=len(keys), seed=np.random.default_rng(seed)).random(n)
+    points = np.clip(points, U_TAIL, 1 - U_TAIL)
+    marginals = _marginals(study, study.surfaces[0], keys)  # epistemic: surface-independent
+    return {k: m.ppf(points[:, j]) for j, (k, m) in enumerate(zip(keys, marginals))}
+
+
+def _fragility(study: HazardStudy, pooled: list[_Estimate], outer) -> dict[str, list[float]]:
+    median = float(study.drop_height.frozen.median())
+    strata = [(e.surface.weight, e.result) for e in pooled]
+    out: dict[str, list[float]] = {"median": [], "probability": [], "cov": [], "band_low": [],
+                                   "band_high": []}
+    for factor in FRAGILITY_FACTORS:
+        drop = _scaled_drop(study.drop_height, factor)
+        p, se = _reweighted(strata, drop)
+        out["median"].append(median * factor)
+        out["probability"].append(p)
+        out["cov"].append(se / p if p > 0 else math.inf)
+        draws = [_reweighted(parts, drop)[0] for parts in outer]
+        out["band_low"].append(float(np.quantile(draws, BAND[0])) if draws else math.nan)
+        out["band_high"].append(float(np.quantile(draws, BAND[1])) if draws else math.nan)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# output
+# --------------------------------------------------------------------------------------------
+
+
+def _plain(value):
+    """JSON-ready: numpy scalars to Python, non-finite floats to strings."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        value = float(value)
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def _unit(key: str) -> str:
+    if key in SI_UNITS:
+        return SI_UNITS[key]
+    if key in EXTRA_KEYS:
+        return EXTRA_KEYS[key][0]
+    return "m"
+
+
+def _shown(key: str, value: float) -> str:
+    """A value with its unit, in the summary's display unit."""
+    unit = _unit(key)
+    if key in _DISPLAY_UNITS:
+        return f"{from_si(value, unit, _DISPLAY_UNITS[key]):.4g} {_DISPLAY_UNITS[key]}"
+    return f"{value:.4g}" + ("" if unit in ("1", "-") else f" {unit}")
+
+
+def _write(result: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    files = [out / "summary.json", out / "summary.md", out / "fragility.csv"]
+    data = result.to_dict()
+    data["study"] = {"file": study.file, "sha256": study.sha256}
+    data.pop("files", None)
+    data.pop("wall_time", None)  # machine-dependent: the summary stays reproducible
+    files[0].write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    files[1].write_text(_markdown(result, study), encoding="utf-8")
+    f = result.fragility
+    lines = ["median_drop_height_m,probability,cov,band_low,band_high"]
+    lines += [f"{m:.6g},{p:.6g},{c:.4g},{lo:.6g},{hi:.6g}" for m, p, c, lo, hi in
+              zip(f["median"], f["probability"], f["cov"], f["band_low"], f["band_high"])]
+    files[2].write_text("\n".join(lines) + "\n", encoding="utf-8")
+    files += _figures(result, study, out)
+    return files
+
+
+def _markdown(r: HazardResult, study: HazardStudy) -> str:
+    lo, hi = r.interval
+    lines = [
+        f"# Hazard study `{r.name}`",
+        "",
+        f"Study file `{Path(study.file).name}` (sha256 {study.sha256[:12]}). "
+        f"{study.description}",
+        "",
+        "## Probability of a reaction per accident",
+        "",
+        f"- **P = {r.probability:.3g}** per accident, 95 % interval [{lo:.3g}, {hi:.3g}], "
+        f"CoV {r.cov:.3f} (epistemic inputs averaged in: the pooled estimate).",
+    ]
+    if r.epistemic_probabilities.size:
+        e = r.epistemic_probabilities
+        lines.append(
+            f"- Epistemic band (kinetics held at each of {e.size} Latin-hypercube draws): "
+            f"5-95 % [{r.band[0]:.3g}, {r.band[1]:.3g}], median {np.median(e):.3g}, mean "
+            f"{e.mean():.3g} (the pooled P estimates this mean); draws' own CoV at most "
+            f"{np.max(r.epistemic_covs):.2f}.")
+    lines += [
+        f"- Solver runs: {r.runs['total']} ({r.runs['pooled']} pooled, {r.runs['epistemic']} "
+        f"epistemic loop), tier `{study.solver.tier}`, rtol {study.solver.rtol:g}; "
+        f"failures: {r.failed}.",
+        f"- Solver tolerance: -d ln P / d ln H_c = {r.elasticity:.1f}, so an error of rtol = "
+        f"{study.solver.rtol:g} on every H_c would move P by about "
+        f"{r.elasticity * study.solver.rtol:.0%}.",
+        "",
+        "## Per surface (pooled)",
+        "",
+        "| surface | weight | P(reaction given surface) | share of P per accident | "
+        "95 % interval of share | CoV | runs | failed |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for s in r.surfaces:
+        lines.append(f"| {s.material} | {s.weight:g} | {s.conditional:.3g} | {s.share:.3g} | "
+                     f"[{s.interval[0]:.3g}, {s.interval[1]:.3g}] | {s.cov:.3f} | {s.runs} | "
+                     f"{s.failed} |")
+    lines += ["", f"The shares sum to P = {r.probability:.3g}.", "",
+              "## Design point: the most likely initiating combination", "",
+              f"Surface **{r.design_point['surface']}**; it reacts from a drop of "
+              f"{r.design_point['critical_height']:.3g} m or more "
+              f"({from_si(r.design_point['critical_height'], 'm', 'ft'):.3g} ft).", "",
+              "| input | design point | median of its distribution | E[U given reaction] |",
+              "|---|---|---|---|"]
+    best = next(e for e in r.surfaces if e.material == r.design_point["surface"])
+    medians = _medians(study, best.material)
+    for key, value in best.design_point.items():
+        lines.append(f"| `{key}` | {_shown(key, value)} | {_shown(key, medians[key])} | "
+                     f"{r.importance[key]:+.2f} |")
+    lines += ["", "E[U given reaction]: the mean normal score of each input over the reactions "
+              "(share-weighted over the surfaces), in standard deviations from its median: the "
+              "inputs that a reaction pulls furthest drive the hazard.", "",
+              "Design point per surface:", "",
+              "| surface | H_c at its design point | ln density (relative) |", "|---|---|---|"]
+    top = max(s.design_log_density for s in r.surfaces)
+    for s in r.surfaces:
+        lines.append(f"| {s.material} | {s.design_critical_height:.3g} m | "
+                     f"{s.design_log_density - top:+.1f} |")
+    f = r.fragility
+    lines += ["", "## Fragility: P against the median drop height", "",
+              "The same H_c samples reweighted (no extra solver run); the band from the "
+              "epistemic draws' samples.", "",
+              "| median drop height | P per accident | CoV | epistemic 5 % | epistemic 95 % |",
+              "|---|---|---|---|---|"]
+    for m, p, c, a, b in zip(f["median"], f["probability"], f["cov"], f["band_low"],
+                             f["band_high"]):
+        lines.append(f"| {m:.3g} m | {p:.3g} | {c:.2f} | {a:.3g} | {b:.3g} |")
+    lines += ["", "## Notes", ""]
+    lines += [f"- {n}" for n in r.notes] or ["- none"]
+    if r.failure_reasons:
+        lines += ["", "Failure reasons:", ""] + [f"- {x}" for x in r.failure_reasons]
+    lines += ["", "Figures: `fragility.png`, `importance.png`. Data: `summary.json`, "
+              "`fragility.csv`.", ""]
+    return "\n".join(lines)
+
+
+def _medians(study: HazardStudy, material: str) -> dict[str, float]:
+    surface = next(s for s in study.surfaces if s.material == material)
+    keys = (*study.aleatory_keys, *study.epistemic_keys)
+    return {k: float(m.median()) for k, m in zip(keys, _marginals(study, surface, keys))}
+
+
+def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:  # pragma: no cover - matplotlib is in the figures extra
+        warnings.warn("matplotlib is not installed: hazard figures skipped", RuntimeWarning,
+                      stacklevel=3)
+        return []
+    paths = []
+    f = r.fragility
+    fig, ax = plt.subplots(figsize=(6, 4))
+    m = np.array(f["median"])
+    p = np.array(f["probability"])
+    c = np.array(f["cov"])
+    if np.isfinite(f["band_low"]).all():
+        ax.fill_between(m, f["band_low"], f["band_high"], color="C0", alpha=0.2,
+                        label="epistemic 5-95 %")
+    ax.errorbar(m, p, yerr=_Z * c * p, fmt="o-", color="C0", capsize=3,
+                label="pooled, 95 % interval")
+    ax.axvline(float(study.drop_height.frozen.median()), color="grey", ls=":",
+               label="study median")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xticks(m[::2], [f"{v:.3g}" for v in m[::2]])
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    ax.set_xlabel("median drop height [m]")
+    ax.set_ylabel("P(reaction) per accident")
+    ax.set_title(f"{r.name}: fragility")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    paths.append(out / "fragility.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 4), gridspec_kw={"width_ratios": [3, 2]})
+    keys = list(r.importance)
+    values = [r.importance[k] for k in keys]
+    ax1.barh(range(len(keys)), values, color=["C3" if v > 0 else "C0" for v in values])
+    ax1.set_yticks(range(len(keys)), [k.replace("kinetics.", "k.") for k in keys], fontsize=8)
+    ax1.axvline(0, color="black", lw=0.5)
+    ax1.set_xlabel("E[U | reaction] [standard deviations]")
+    ax1.invert_yaxis()
+    names = [s.material for s in r.surfaces]
+    x = np.arange(len(names))
+    ax2.bar(x - 0.2, [s.weight for s in r.surfaces], 0.4, label="share of accidents")
+    ax2.bar(x + 0.2, [s.share / r.probability if r.probability > 0 else 0
+                      for s in r.surfaces], 0.4, label="share of P")
+    ax2.set_xticks(x, names, rotation=30, fontsize=8)
+    ax2.legend(fontsize=8)
+    fig.suptitle(f"{r.name}: what drives a reaction")
+    fig.tight_layout()
+    paths.append(out / "importance.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+    return paths
+
+
+def main(argv=None) -> int:
+    """``python -m skidmc.analysis.handling STUDY [OUT_DIR] [--workers N]``: run and summarise.
+
+    OUT_DIR defaults to ``results/<study name>``. Prints the summary's first lines.
+    """
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m skidmc.analysis.handling",
+                                     description="Run a hazard study (skidmc.analysis.handling).")
+    parser.add_argument("study", help="hazard study file (TOML with a [hazard] table)")
+    parser.add_argument("out_dir", nargs="?", help="results folder (default results/<name>)")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="local worker processes (default 1: in this process)")
+    args = parser.parse_args(argv)
+    study = load_hazard_study(args.study)
+    out = Path(args.out_dir) if args.out_dir else Path("results") / study.name
+    result = run_hazard_study(study, out, workers=args.workers,
+                              progress=lambda line: print(line, flush=True))
+    lo, hi = result.interval
+    print(f"P = {result.probability:.3g} per accident, 95 % [{lo:.3g}, {hi:.3g}], "
+          f"epistemic 5-95 % [{result.band[0]:.3g}, {result.band[1]:.3g}]; "
+          f"{result.runs['total']} solver runs; written to {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
