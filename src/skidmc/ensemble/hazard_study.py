@@ -88,6 +88,7 @@ from skidmc.ensemble.study import (
     _Parser,
     _suggest,
     _toml_key,
+    read_study_text,
 )
 from skidmc.ensemble.study_model import (
     RATE_AT_REFERENCE,
@@ -290,11 +291,7 @@ def load_hazard_study(path: str | Path) -> HazardStudy:
         The file cannot be read, is not valid TOML, or breaks a rule of the format.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise StudyError(str(path), "(file)", None, f"cannot read: {exc}") from None
-    return parse_hazard_study(text, file=str(path))
+    return parse_hazard_study(read_study_text(path), file=str(path))
 
 
 def parse_hazard_study(text: str, file: str = "<string>") -> HazardStudy:

@@ -128,6 +128,7 @@ __all__ = [
     "StudyScene",
     "load_study",
     "parse_study",
+    "read_study_text",
 ]
 
 _TOP_LEVEL = ("study", "scene", "scenes", "uncertain", "correlation", "design", "solver")
@@ -167,11 +168,15 @@ def load_study(path: str | Path) -> Study:
         The file cannot be read, is not valid TOML, or breaks a rule of the format.
     """
     path = Path(path)
+    return parse_study(read_study_text(path), file=str(path))
+
+
+def read_study_text(path: Path) -> str:
+    """The text of a study file (UTF-8), or a StudyError naming the file."""
     try:
-        text = path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise StudyError(str(path), "(file)", None, f"cannot read: {exc}") from None
-    return parse_study(text, file=str(path))
 
 
 def parse_study(text: str, file: str = "<string>") -> Study:
