@@ -397,8 +397,8 @@ def analyse_ensemble(ds: xr.Dataset, *, experiments: Mapping[str, str] | None = 
     ----------
     ds : xarray.Dataset
     experiments : mapping of str to str, optional
-        Scene name -> experiment name; default: the study's ``experiment`` keys (attribute
-        ``scene_experiments``), if any.
+        Scene name -> experiment name; default: the study's ``experiment`` keys (from
+        ``attrs["study"]``, as :func:`~skidmc.analysis.open_ensemble` decodes it), if any.
     confidence : float
 
     Returns
@@ -412,14 +412,9 @@ def analyse_ensemble(ds: xr.Dataset, *, experiments: Mapping[str, str] | None = 
 
 
 def _study_experiments(ds: xr.Dataset) -> dict[str, str]:
-    text = ds.attrs.get("study_text", "")
-    if not text:
-        return {}
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib
-    doc = tomllib.loads(text)
+    """Scene -> experiment from the study that :func:`~skidmc.analysis.open_ensemble` decoded
+    (``attrs["study"]``); none for a Dataset without it."""
+    doc = ds.attrs.get("study") or {}
     return {sc["name"]: sc["experiment"] for sc in doc.get("scenes", [])
             if "experiment" in sc and "name" in sc}
 

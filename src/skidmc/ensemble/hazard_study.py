@@ -88,6 +88,7 @@ from skidmc.ensemble.study import (
     _Parser,
     _suggest,
     _toml_key,
+    parse_toml,
     read_study_text,
 )
 from skidmc.ensemble.study_model import (
@@ -313,11 +314,7 @@ def parse_hazard_study(text: str, file: str = "<string>") -> HazardStudy:
     StudyError
         On the first rule the study breaks: the message names the key path and the value.
     """
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise StudyError(file, "(syntax)", None, f"not valid TOML: {exc}") from None
-    return _HazardParser(file, doc).hazard(text)
+    return _HazardParser(file, parse_toml(text, file)).hazard(text)
 
 
 class _HazardParser(_Parser):

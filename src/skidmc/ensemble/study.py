@@ -128,6 +128,7 @@ __all__ = [
     "StudyScene",
     "load_study",
     "parse_study",
+    "parse_toml",
     "read_study_text",
 ]
 
@@ -198,11 +199,15 @@ def parse_study(text: str, file: str = "<string>") -> Study:
     StudyError
         On the first rule the study breaks.
     """
+    return _Parser(file, parse_toml(text, file)).study(text)
+
+
+def parse_toml(text: str, file: str) -> dict:
+    """The TOML document of a study file's text, or a StudyError naming the file."""
     try:
-        doc = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise StudyError(file, "(syntax)", None, f"not valid TOML: {exc}") from None
-    return _Parser(file, doc).study(text)
 
 
 def _toml_key(*parts: str | int) -> str:
