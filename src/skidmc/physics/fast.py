@@ -105,6 +105,7 @@ __all__ = [
     "N_GAUSS",
     "N_TIMES",
     "duhamel_theta",
+    "fast_height_core",
     "fast_height_kernel",
     "fast_heights_kernel",
     "melt_depression",
@@ -369,6 +370,26 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
     melting : bool
         Whether melting was modelled.
     """
+    return fast_height_core(mu, flow_stress, billet_mass, billet_diameter, angle, tilt,
+                            initial_temperature, he_density, he_heat_capacity, he_conductivity,
+                            he_heat_of_fusion, he_melting_point, prefactor,
+                            activation_temperature, heat_of_reaction, target_density,
+                            target_heat_capacity, target_conductivity, h_min, h_max, c_ign,
+                            melt_factor, table, gl_x, gl_w, n_times, np.empty(n_times),
+                            np.empty(n_times), np.empty(n_times))
+
+
+@njit(cache=True)
+def fast_height_core(mu, flow_stress, billet_mass, billet_diameter, angle, tilt,
+                     initial_temperature, he_density, he_heat_capacity, he_conductivity,
+                     he_heat_of_fusion, he_melting_point, prefactor, activation_temperature,
+                     heat_of_reaction, target_density, target_heat_capacity,
+                     target_conductivity, h_min, h_max, c_ign, melt_factor, table,
+                     gl_x, gl_w, n_times, times, theta, temp):
+    """:func:`fast_height_kernel` on caller-owned work arrays ``times``, ``theta``, ``temp``
+    (each at least ``n_times`` long, overwritten), allocating nothing: the same code serves a
+    GPU thread (:mod:`skidmc.solver.device`), whose local memory NumPy cannot allocate.
+    """
     omega, _, t_exit, exit_code, s, c = impact_constants(mu, flow_stress, billet_mass,
                                                       billet_diameter, angle, tilt)
     if not (mu > 0.0) or not (prefactor > 0.0):
@@ -376,10 +397,8 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
     e1 = math.sqrt(he_conductivity * he_density * he_heat_capacity)
     e2 = math.sqrt(target_conductivity * target_density * target_heat_capacity)
     share = e1 / (e1 + e2)
-    times = np.empty(n_times)
     for k in range(n_times):
         times[k] = t_exit * (k + 1.0) / n_times
-    theta = np.empty(n_times)
     duhamel_theta(mu * flow_stress * math.sqrt(2.0 * STANDARD_GRAVITY), s, c, omega, t_exit,
                   e1 + e2,
                   times, gl_x, gl_w, theta)
@@ -406,7 +425,6 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
     if not (th_max > 0.0):
         return h_max, CENSOR_ABOVE, t_exit, exit_code, melting
     ln_c = math.log(c_ign)
-    temp = np.empty(n_times)
     rh_lo = math.sqrt(h_min)
     rh_hi = math.sqrt(h_max)
     f_lo = _margin(rh_lo, times, theta, t0, t_act, ln_z, rise_ad, melt_rise, melt_rel, share,

@@ -54,6 +54,7 @@ __all__ = [
     "STEP_SAFETY",
     "adiabatic_induction_time",
     "runaway_temperature",
+    "simulate_core",
     "simulate_kernel",
 ]
 
@@ -231,22 +232,56 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     """
     n = width.shape[0]
     n_he = n - n_target
-    # Temperatures (the unknowns) and enthalpies at t_n, t_{n-1}, t_{n-2}.
-    temp = np.empty(n)
-    temp_prev = np.empty(n)
-    temp_prev2 = np.empty(n)
-    temp_new = np.empty(n)
-    h = np.empty(n)
-    h_prev = np.empty(n)
-    h_new = np.empty(n)
-    dhdt = np.empty(n)
-    y = np.zeros(n_he)
-    y_prev = np.zeros(n_he)
-    y_new = np.zeros(n_he)
-    hist_h = np.empty(n)
-    hist_y = np.empty(n_he)
-    cp = np.empty(n)
-    dp = np.empty(n)
+    info = np.zeros(INFO_SIZE)
+    simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
+                  he_density, latent_heat, melting_point, melt_width,
+                  prefactor, activation_temperature, heat_of_reaction,
+                  q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
+                  initial_temperature, tol_temperature, dt_initial,
+                  runaway_fraction, max_steps, record_t, record_tb, record_t.shape[0],
+                  np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
+                  np.empty(n), np.empty(n), np.empty(n_he), np.empty(n_he), np.empty(n_he),
+                  np.empty(n), np.empty(n_he), np.empty(n), np.empty(n), info)
+    return info
+
+
+@njit(cache=True, nogil=True)
+def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
+                  he_density, latent_heat, melting_point, melt_width,
+                  prefactor, activation_temperature, heat_of_reaction,
+                  q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
+                  initial_temperature, tol_temperature, dt_initial,
+                  runaway_fraction, max_steps, record_t, record_tb, n_record,
+                  temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new, dhdt,
+                  y, y_prev, y_new, hist_h, hist_y, cp, dp, info):
+    """:func:`simulate_kernel` on caller-owned storage, allocating nothing.
+
+    The one integrator of both backends: the CPU wrapper :func:`simulate_kernel` allocates the
+    work arrays with NumPy; a GPU thread (:mod:`skidmc.solver.device`) passes arrays of its own
+    local memory, where NumPy cannot allocate. Only the first ``n`` cells of each array (the
+    first ``n - n_target`` of the HE arrays ``y*`` and ``hist_y``) are used, so fixed-size
+    arrays larger than the mesh serve any level up to their size.
+
+    Parameters
+    ----------
+    n : int
+        Number of cells used.
+    n_record : int
+        How many steps to record in ``record_t``, ``record_tb`` (0: none).
+    temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new, dhdt, hist_h, cp, dp : ndarray
+        Work arrays of at least ``n`` cells (overwritten).
+    y, y_prev, y_new, hist_y : ndarray
+        Work arrays of at least ``n - n_target`` cells (overwritten).
+    info : ndarray, shape (INFO_SIZE,)
+        Written with the outcome (see :func:`simulate_kernel` for the other arguments).
+    """
+    n_he = n - n_target
+    for k in range(INFO_SIZE):
+        info[k] = 0.0
+    for j in range(n_he):
+        y[j] = 0.0
+        y_prev[j] = 0.0
+        y_new[j] = 0.0
 
     latent_v = he_density * latent_heat
     q_v = he_density * heat_of_reaction
@@ -287,12 +322,10 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
             h[i] = rho_c[i] * initial_temperature
         h_prev[i] = h[i]
 
-    info = np.zeros(INFO_SIZE)
     info[INFO_T_EVENT] = np.inf
     info[INFO_T_MAX] = initial_temperature
     info[INFO_T_EXIT_MAX] = np.nan
     info[INFO_Y_EXIT_MAX] = np.nan
-    n_record = record_t.shape[0]
     # Side conductances at the interface, for the recorded T_b of Eq. (16):
     # G = g_t g_h / (g_t + g_h) and s = g_h / (g_t + g_h) give g_t = G / s, g_h = G / (1 - s).
     g_t = face_conductance[n_target - 1] / q_share_he
@@ -521,4 +554,3 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     info[INFO_STEPS] = steps
     info[INFO_REJECTED] = rejected
     info[INFO_T_FINAL] = t
-    return info

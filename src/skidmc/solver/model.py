@@ -23,8 +23,10 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from skidmc.physics import mechanics
+from skidmc.physics.meshes import fill_meshes, geometric_ratio, reaction_zone
 from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION, runaway_temperature
 
 __all__ = [
@@ -42,6 +44,9 @@ __all__ = [
     "SkidModel",
     "build_model",
     "estimated_reaction_zone",
+    "flux_extension",
+    "ignition_temperature",
+    "model_runaway_temperature",
     "geometric_widths",
     "melt_width_floor",
     "resolution_for_level",
@@ -195,46 +200,20 @@ def resolution_for_level(level, melt_width=None):
 def geometric_widths(first_width, depth, n_cells):
     """Cell widths [m] of a geometric mesh of ``n_cells`` cells, ``depth`` deep.
 
-    The first cell is ``first_width`` wide.
-
-    The growth ratio r solves first_width (r^n - 1)/(r - 1) = depth; if even a uniform
-    mesh of ``first_width`` cells is deeper than ``depth``, the mesh is uniform.
+    The first cell is ``first_width`` wide; the growth ratio is
+    :func:`skidmc.physics.meshes.geometric_ratio` (a uniform mesh when even a uniform mesh of
+    ``first_width`` cells is deeper than ``depth``).
     """
-    if first_width * n_cells >= depth:
-        return np.full(n_cells, first_width)
-    target = depth / first_width
-    lo, hi = 1.0 + 1e-12, 2.0
-    while (hi**n_cells - 1.0) / (hi - 1.0) < target:
-        hi *= 2.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if (mid**n_cells - 1.0) / (mid - 1.0) < target:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo < 1e-14 * mid:
-            break
-    r = 0.5 * (lo + hi)
-    return first_width * r ** np.arange(n_cells)
+    r = geometric_ratio(first_width, depth, n_cells)
+    return first_width * r ** np.arange(n_cells, dtype=float)
 
 
 def estimated_reaction_zone(model_time, he_diffusivity, initial_temperature, prefactor,
                             activation_temperature):
-    """Rough thickness of the reacting layer at ignition [m], used only to size the mesh.
-
-    The surface ignites near the temperature T_i at which the reaction time
-    1/(Z exp(-T_a/T_i)) is ~1e-3 of the contact time; the layer in which the rate is
-    within a factor e of the surface rate is ~ sqrt(alpha t) T_i^2 / (T_a (T_i - T0))
-    (the thermal layer times the temperature fraction within T_i^2/T_a of the top).
-    """
-    thermal_layer = math.sqrt(he_diffusivity * model_time)
-    if prefactor <= 0.0:
-        return thermal_layer
-    log_arg = math.log(max(prefactor * model_time * 1e-3, math.e))
-    t_ign = activation_temperature / log_arg
-    rise = max(t_ign - initial_temperature, 1.0)
-    zone = thermal_layer * t_ign**2 / (activation_temperature * rise)
-    return min(zone, thermal_layer)
+    """Rough thickness of the reacting layer at ignition [m], used only to size the mesh
+    (:func:`skidmc.physics.meshes.reaction_zone`)."""
+    return float(reaction_zone(model_time, he_diffusivity, initial_temperature, prefactor,
+                               activation_temperature))
 
 
 @dataclass
@@ -359,23 +338,15 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         if t_exit < EARLY_STOP_FRACTION * t_c:
             flags.append("stops_early")
 
-    # Flux extension after the exit, for the search's continuous margin only: keep
-    # the exit flux (continuous) unless it has dropped below the contact's mean.
-    wt = omega * t_exit
-    mean_shape = slide_s - slide_c * (1.0 - math.sin(wt) / wt)
-    exit_shape = max(slide_s - slide_c * (1.0 - math.cos(wt)), 0.0)
-    extension = max(exit_shape, mean_shape)
+    extension, mean_shape = flux_extension(omega, t_exit, slide_s, slide_c)
 
     t_end = horizon * t_exit
     heat_of_reaction = scene.kinetics_heat_of_reaction
     prefactor = scene.kinetics_prefactor
     t_a = scene.kinetics_activation_temperature
     adiabatic_rise = heat_of_reaction / scene.he_heat_capacity
-    if runaway_fraction > 0.0 and prefactor > 0.0 and adiabatic_rise > 0.0:
-        t_run = float(runaway_temperature(prefactor, t_a, adiabatic_rise, t_exit,
-                                          runaway_fraction))
-    else:
-        t_run = math.inf
+    t_run = float(model_runaway_temperature(prefactor, t_a, adiabatic_rise, t_exit,
+                                            runaway_fraction))
 
     t_ign, rest_time = _ignition_diagnostics(prefactor, t_a, adiabatic_rise,
                                              scene.initial_temperature, t_exit)
@@ -423,7 +394,7 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
 
 
 def _meshes(scene, resolution, t_exit, t_end, prefactor, activation_temperature):
-    """Both media's meshes as the kernels take them (see :func:`build_model`).
+    """Both media's meshes as the kernels take them (:func:`skidmc.physics.meshes.fill_meshes`).
 
     Returns
     -------
@@ -436,32 +407,15 @@ def _meshes(scene, resolution, t_exit, t_end, prefactor, activation_temperature)
     q_share_he : float
         Share of the interface flux that enters the HE [1].
     """
-    he_rho_c = scene.he_density * scene.he_heat_capacity
-    tg_rho_c = scene.target_density * scene.target_heat_capacity
-    alpha_he = scene.he_conductivity / he_rho_c
-    alpha_tg = scene.target_conductivity / tg_rho_c
     n_cells = resolution.cells_per_medium
-    # First HE cell from the reaction zone, target's scaled by sqrt(alpha2/alpha1) so both
-    # resolve the same time scale; depth from each medium's diffusion length.
-    zone = estimated_reaction_zone(t_exit, alpha_he, scene.initial_temperature, prefactor,
-                                   activation_temperature)
-    h0_he = resolution.first_cell_fraction * zone
-    h0_tg = h0_he * math.sqrt(alpha_tg / alpha_he)
-    w_he = geometric_widths(h0_he, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_he * t_end),
-                            n_cells)
-    w_tg = geometric_widths(h0_tg, DEPTH_DIFFUSION_LENGTHS * math.sqrt(alpha_tg * t_end),
-                            n_cells)
-    width = np.concatenate([w_tg[::-1], w_he])
-    rho_c = np.concatenate([np.full(n_cells, tg_rho_c), np.full(n_cells, he_rho_c)])
-    k = np.concatenate([np.full(n_cells, scene.target_conductivity),
-                        np.full(n_cells, scene.he_conductivity)])
-    # Face conductance between cells i and i+1: resistances w/(2k) in series (the
-    # interface face is Eq. 16's elimination of T_b).
-    half_res = width / (2.0 * k)
-    face = 1.0 / (half_res[:-1] + half_res[1:])
-    g_tg = 1.0 / half_res[n_cells - 1]
-    g_he = 1.0 / half_res[n_cells]
-    return width, rho_c, face, g_he / (g_tg + g_he)
+    width, rho_c, face = np.empty(2 * n_cells), np.empty(2 * n_cells), np.empty(2 * n_cells - 1)
+    share = fill_meshes(scene.he_density, scene.he_heat_capacity, scene.he_conductivity,
+                        scene.target_density, scene.target_heat_capacity,
+                        scene.target_conductivity, scene.initial_temperature, prefactor,
+                        activation_temperature, t_exit, t_end, n_cells,
+                        resolution.first_cell_fraction, DEPTH_DIFFUSION_LENGTHS,
+                        width, rho_c, face)
+    return width, rho_c, face, float(share)
 
 
 def _ignition_diagnostics(prefactor, activation_temperature, adiabatic_rise,
@@ -480,11 +434,47 @@ def _ignition_diagnostics(prefactor, activation_temperature, adiabatic_rise,
                                          / (activation_temperature * adiabatic_rise))
                            if adiabatic_rise > 0.0 else 0.0)
     rest_time = math.exp(min(ln_rest, 700.0))
-    if adiabatic_rise > 0.0:
-        t_ign = float(runaway_temperature(prefactor, activation_temperature, adiabatic_rise,
-                                          t_exit, 1.0))
-    elif prefactor * t_exit > 1.0:
-        t_ign = activation_temperature / math.log(prefactor * t_exit)
-    else:
-        t_ign = math.inf
+    t_ign = float(ignition_temperature(prefactor, activation_temperature, adiabatic_rise, t_exit))
     return t_ign, rest_time
+
+
+# --- the scalar parts of the model as compiled functions: build_model and a GPU thread
+# (skidmc.solver.device) share them.
+
+@njit(cache=True)
+def flux_extension(omega, t_exit, slide_s, slide_c):
+    """Flux after the exit over q0, and the contact's mean flux shape over q0 [1].
+
+    Beyond t_exit the flux is extended only to give the critical-height search a continuous
+    margin: the exit flux (continuous) is kept unless it has dropped below the contact's mean
+    (Eq. 10's shape s - c (1 - cos omega t) averaged over (0, t_exit)).
+    """
+    wt = omega * t_exit
+    mean_shape = slide_s - slide_c * (1.0 - math.sin(wt) / wt)
+    exit_shape = max(slide_s - slide_c * (1.0 - math.cos(wt)), 0.0)
+    return max(exit_shape, mean_shape), mean_shape
+
+
+@njit(cache=True)
+def model_runaway_temperature(prefactor, activation_temperature, adiabatic_rise, t_exit,
+                              runaway_fraction):
+    """The runaway rule's temperature [K] (:func:`skidmc.physics.thermal.runaway_temperature`),
+    inf for an inert HE or with the rule switched off (``runaway_fraction`` 0)."""
+    if runaway_fraction > 0.0 and prefactor > 0.0 and adiabatic_rise > 0.0:
+        return runaway_temperature(prefactor, activation_temperature, adiabatic_rise, t_exit,
+                                   runaway_fraction)
+    return math.inf
+
+
+@njit(cache=True)
+def ignition_temperature(prefactor, activation_temperature, adiabatic_rise, t_exit):
+    """Temperature [K] at which the adiabatic induction time equals t_exit (for an inert HE,
+    dT_ad = 0, where the reaction time 1/k does); inf when none (``prefactor`` <= 0)."""
+    if not prefactor > 0.0:
+        return math.inf
+    if adiabatic_rise > 0.0:
+        return runaway_temperature(prefactor, activation_temperature, adiabatic_rise, t_exit,
+                                   1.0)
+    if prefactor * t_exit > 1.0:
+        return activation_temperature / math.log(prefactor * t_exit)
+    return math.inf
