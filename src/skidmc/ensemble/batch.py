@@ -43,7 +43,10 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         bare numbers are SI and not checked for plausibility); or one mapping
         ``{key: 1-D array}`` of columns.
     solver_options : SolverOptions or mapping, optional
-        Keyword arguments of :func:`skidmc.solver.critical_height` (default: its defaults).
+        Keyword arguments of :func:`skidmc.solver.critical_height` (default: its defaults),
+        and ``backend``: "cpu" (default) or "cuda", the GPU backend of the full tier
+        (:mod:`skidmc.solver.cuda`), which solves the batch in this process whatever
+        `workers` says.
     base : Scene or str, optional
         Scene or preset name the mapping rows override; without it rows must be complete.
     workers : int or None
@@ -79,7 +82,10 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         resolve_solver(solver)  # a TypeError now rather than one per sample
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1 (or None: all CPUs), got {workers!r}")
-    if scheduler in (None, "local") and (workers or default_workers()) == 1:
+    if scheduler in (None, "local") and ((workers or default_workers()) == 1
+                                         or kwargs.get("backend", "cpu") != "cpu"):
+        # The GPU backend takes the whole batch in this process (one kernel launch per
+        # LAUNCH_SIZE scenes); worker processes would only share the one GPU.
         return evaluate_here(scenes, kwargs, base, solver)
     return _evaluate_rows_parallel(as_rows(scenes), kwargs, base, workers, chunk_size, scheduler,
                                    solver)

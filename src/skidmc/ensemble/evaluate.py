@@ -159,6 +159,7 @@ def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None,
     m = len(rows)
     out = empty_result(m)
     base_values = base.as_dict() if base is not None else {}
+    pending = []
     for i, row in enumerate(rows):
         try:
             # rows are programmatic SI floats (samples): no plausibility check on bare numbers
@@ -171,7 +172,8 @@ def _evaluate_rows(rows: list, kwargs: dict, base: Scene | None,
         values = scene.as_dict()
         for k in NUMERIC_KEYS:
             out.inputs[k][i] = values[k]
-        _solve_into(out, i, critical_height, scene, kwargs)
+        pending.append((i, scene))
+    _solve_pending(out, pending, critical_height, kwargs)
     return out
 
 
@@ -197,6 +199,7 @@ def _evaluate_columns(columns: Mapping, kwargs: dict, base: Scene | None,
     for k in NUMERIC_KEYS:
         out.inputs[k][:] = columns.get(k, base_values[k])
     derived = [(out.inputs[k], k.replace(".", "_")) for k in scenes.derived]  # attribute names
+    pending = []
     for i in range(m):
         try:
             scene = scenes.scene(i)
@@ -205,5 +208,39 @@ def _evaluate_columns(columns: Mapping, kwargs: dict, base: Scene | None,
             continue
         for values, field in derived:
             values[i] = getattr(scene, field)
-        _solve_into(out, i, critical_height, scene, kwargs)
+        pending.append((i, scene))
+    _solve_pending(out, pending, critical_height, kwargs)
     return out
+
+
+def _solve_pending(out: BatchResult, pending: list, critical_height, kwargs: dict) -> None:
+    """Solve the valid samples ``pending`` = [(index, scene)] into `out`.
+
+    With ``backend="cuda"`` in `kwargs` the whole list goes to the GPU backend at once
+    (:func:`skidmc.solver.cuda.solve_scenes`; each sample's wall time is its share of the
+    batch's); otherwise one :func:`_solve_into` per sample.
+    """
+    kwargs = dict(kwargs)
+    backend = kwargs.pop("backend", "cpu")
+    if backend == "cpu":
+        for i, scene in pending:
+            _solve_into(out, i, critical_height, scene, kwargs)
+        return
+    from skidmc.solver.cuda import solve_scenes
+
+    t0 = time.perf_counter()
+    results = solve_scenes([scene for _, scene in pending], backend=backend,
+                           fallback=critical_height, **kwargs)
+    share = (time.perf_counter() - t0) / max(1, len(pending))
+    for (i, scene), res in zip(pending, results):
+        (out.critical_height[i], out.status[i], out.evaluations[i], out.flags[i],
+         out.failure_reason[i]) = _solve(lambda _scene, _res=res, **_kw: _raise_or(_res),
+                                         scene, {})
+        out.wall_time[i] = share
+
+
+def _raise_or(result):
+    """`result`, or raise it when it is the exception a sample's solve ended with."""
+    if isinstance(result, BaseException):
+        raise result
+    return result

@@ -369,6 +369,13 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
             study = load_study(study)
         if n is not None:
             study = study.with_n(n)
+        if study.solver.backend != "cpu" and scheduler in (None, "local") and not use_dask:
+            # The GPU backend solves each chunk in one launch: one local process drives the GPU
+            # (worker processes would only queue on it).
+            workers = 1
+            if executor is not None and owned:
+                executor.shutdown()
+            executor, owned = None, False
         path = _resolve_out(study, out)
         command = command or f"run_study({study.file!r}, n={study.design.n})"
         report = RunReport(path=path, n_rows=study.n_rows, n_scenes=len(study.scenes),

@@ -138,7 +138,9 @@ _SCENE_RESERVED = ("name", "preset", "uncertain", "experiment")
 _DIST_META = ("distribution", "source", "relative", "reference_temperature", "kind")
 _DESIGN_KEYS = ("method", "n", "seed", "second_order", "n_epistemic", "n_max",
                 "stable_threshold", "stable_half_width")
-_SOLVER_KEYS = ("rtol", "tier", "h_min", "h_max")
+_SOLVER_KEYS = ("rtol", "tier", "h_min", "h_max", "backend")
+#: Where the full tier runs (``[solver] backend``): skidmc.solver.cuda.BACKENDS.
+_BACKENDS = ("cpu", "cuda")
 _CORRELATION_KEYS = ("keys", "spearman", "gaussian", "source")
 _NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 # "<number> <unit>": to convert a spread (a temperature difference) separately from a level.
@@ -702,7 +704,13 @@ class _Parser:
         if not bounds["h_min"] < bounds["h_max"]:
             raise self.error("solver.h_min", table.get("h_min", defaults.h_min),
                              f"must be below h_max ({bounds['h_max']:g} m)")
-        return SolverOptions(rtol=float(rtol), tier=tier, **bounds)
+        backend = table.get("backend", defaults.backend)
+        if not isinstance(backend, str) or backend not in _BACKENDS:
+            raise self.error("solver.backend", backend, _suggest(str(backend), list(_BACKENDS)))
+        if backend != "cpu" and tier != "full":
+            raise self.error("solver.backend", backend,
+                             f"runs the full tier only; tier = {tier!r} runs on the CPU")
+        return SolverOptions(rtol=float(rtol), tier=tier, backend=backend, **bounds)
 
 
 def _solver_tiers() -> tuple[str, ...]:

@@ -214,16 +214,24 @@ class SolverOptions:
         Model fidelity tier.
     h_min, h_max : float
         Search bounds [m]; results beyond them are censored.
+    backend : str
+        Where the full tier runs: "cpu" (default) or "cuda" (the GPU backend,
+        :mod:`skidmc.solver.cuda`; a batch at a time, in the process that evaluates it).
     """
 
     rtol: float = 1e-3
     tier: str = "full"
     h_min: float = 1e-3
     h_max: float = 1e4
+    backend: str = "cpu"
 
     def as_kwargs(self) -> dict:
-        """Keyword arguments for :func:`skidmc.solver.critical_height`."""
-        return dataclasses.asdict(self)
+        """Keyword arguments for :func:`skidmc.solver.critical_height` (and ``backend`` when it
+        is not the default "cpu", which :func:`skidmc.evaluate_batch` takes)."""
+        kwargs = dataclasses.asdict(self)
+        if kwargs["backend"] == "cpu":
+            del kwargs["backend"]
+        return kwargs
 
 
 @dataclasses.dataclass(frozen=True)

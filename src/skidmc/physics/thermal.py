@@ -30,6 +30,8 @@ above 0.99 in any cell) is checked too and ends the run if it comes first.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -108,7 +110,7 @@ RETRY_SAFETY = 0.7
 def _flux(t, q0, s, c, w, t_exit, q_ext):
     """Frictional flux q(t) [W/m^2]: q0 (s - c (1 - cos w t)) on [0, t_exit), then q_ext."""
     if t < t_exit:
-        v = s - c * (1.0 - np.cos(w * t))
+        v = s - c * (1.0 - math.cos(w * t))
         return q0 * v if v > 0.0 else 0.0
     return q_ext
 
@@ -134,7 +136,7 @@ def _he_enthalpy(temperature, rho_c, latent_v, melting_point, melt_width):
     # (1 + tanh z) / 2 = e / (1 + e) and (1 - tanh^2 z) / 2 = 2 e / (1 + e)^2 with e = exp(2 z):
     # the same function as tanh, at a third of libm tanh's cost (it is evaluated for every
     # HE cell near T_m in every Newton iteration).
-    e = np.exp(2.0 * z)
+    e = math.exp(2.0 * z)
     inv = 1.0 / (1.0 + e)
     return (rho_c * temperature + latent_v * e * inv,
             rho_c + 2.0 * latent_v * e * inv * inv * inv_width)
@@ -150,13 +152,13 @@ def runaway_temperature(prefactor, activation_temperature, adiabatic_rise, time_
     temperature rise. Solved by bisection on ln tau, which decreases monotonically
     in T for T < T_a / 2.
     """
-    target = np.log(fraction * time_scale)
+    target = math.log(fraction * time_scale)
     lo = 1.0
     hi = 0.5 * activation_temperature
     for _ in range(200):
         mid = 0.5 * (lo + hi)
-        ln_tau = (2.0 * np.log(mid) - np.log(activation_temperature * adiabatic_rise)
-                  - np.log(prefactor) + activation_temperature / mid)
+        ln_tau = (2.0 * math.log(mid) - math.log(activation_temperature * adiabatic_rise)
+                  - math.log(prefactor) + activation_temperature / mid)
         if ln_tau > target:
             lo = mid
         else:
@@ -170,7 +172,7 @@ def runaway_temperature(prefactor, activation_temperature, adiabatic_rise, time_
 def adiabatic_induction_time(temperature, prefactor, activation_temperature, adiabatic_rise):
     """Frank-Kamenetskii adiabatic induction time [s] at ``temperature`` [K]."""
     return temperature**2 / (activation_temperature * adiabatic_rise * prefactor
-                             * np.exp(-activation_temperature / temperature))
+                             * math.exp(-activation_temperature / temperature))
 
 
 @njit(cache=True, nogil=True)
@@ -292,13 +294,13 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
         t_run = runaway_temperature(prefactor, activation_temperature, adiabatic_rise,
                                     t_exit, runaway_fraction)
     else:
-        t_run = np.inf
+        t_run = math.inf
     # Past t_relax (adiabatic induction time below 1e-9 t_exit) the run is a runaway
     # whatever happens next: the step error control is dropped there, and steps are
     # limited only by Newton's convergence, so that the report's own criterion
     # (y > 0.99) is reached in a few dozen steps instead of stalling. The event time
     # moves by at most ~1e-9 t_exit.
-    t_relax = np.inf
+    t_relax = math.inf
     if reactive and adiabatic_rise > 0.0:
         t_relax = runaway_temperature(prefactor, activation_temperature, adiabatic_rise,
                                       t_exit, 1e-9)
@@ -308,7 +310,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
     # event time moves by ~1e-10 relative, the simulation runs ~9 % faster.
     t_cold = 0.0
     if reactive and adiabatic_rise > 0.0:
-        t_cold = activation_temperature / np.log(max(
+        t_cold = activation_temperature / math.log(max(
             prefactor * t_end * adiabatic_rise / (COLD_SOURCE_FRACTION * tol_temperature), 2.0))
 
     for i in range(n):
@@ -322,10 +324,10 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
             h[i] = rho_c[i] * initial_temperature
         h_prev[i] = h[i]
 
-    info[INFO_T_EVENT] = np.inf
+    info[INFO_T_EVENT] = math.inf
     info[INFO_T_MAX] = initial_temperature
-    info[INFO_T_EXIT_MAX] = np.nan
-    info[INFO_Y_EXIT_MAX] = np.nan
+    info[INFO_T_EXIT_MAX] = math.nan
+    info[INFO_Y_EXIT_MAX] = math.nan
     # Side conductances at the interface, for the recorded T_b of Eq. (16):
     # G = g_t g_h / (g_t + g_h) and s = g_h / (g_t + g_h) give g_t = G / s, g_h = G / (1 - s).
     g_t = face_conductance[n_target - 1] / q_share_he
@@ -406,7 +408,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                 if reactive and i >= n_target and temp_new[i] >= t_cold:
                     j = i - n_target
                     inv_t = 1.0 / temp_new[i]
-                    k = prefactor * np.exp(-activation_temperature * inv_t)
+                    k = prefactor * math.exp(-activation_temperature * inv_t)
                     inv_denom = 1.0 / (1.0 + bdt * k)
                     source = q_v * k * (1.0 - hist_y[j]) * inv_denom
                     dsource = source * activation_temperature * inv_t * inv_t * inv_denom
@@ -429,7 +431,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                 delta_next = d_i
                 temp_new[i] += d_i
                 a = abs(d_i)
-                if not np.isfinite(a) or temp_new[i] <= 0.0:
+                if not math.isfinite(a) or temp_new[i] <= 0.0:
                     finite = False
                 if a > change:
                     change = a
@@ -441,7 +443,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
 
         # Final state of the step: enthalpies, fraction reacted, error estimate.
         err = 0.0
-        t_max = -np.inf
+        t_max = -math.inf
         y_max = 0.0
         if converged:
             # One pass: enthalpies, fraction reacted (implicit, closed form), maxima, and the
@@ -457,7 +459,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                                                      melting_point, melt_width)
                     j = i - n_target
                     if reactive and temp_new[i] >= t_cold:
-                        k = prefactor * np.exp(-activation_temperature / temp_new[i])
+                        k = prefactor * math.exp(-activation_temperature / temp_new[i])
                         y_new[j] = (hist_y[j] + bdt * k) / (1.0 + bdt * k)
                     else:
                         y_new[j] = hist_y[j]
@@ -474,7 +476,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                     e = abs(temp_new[i] - pred) * _BDF2_ERROR_CONSTANT
                     if e > err:
                         err = e
-            if not np.isfinite(t_max):
+            if not math.isfinite(t_max):
                 converged = False
             if t_max_prev >= t_relax:
                 err = 0.0

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 
+from numba import njit
+
 from skidmc.errors import SceneError
 from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
 
@@ -100,6 +102,7 @@ MAX_ROOT_TOLERANCE = 5e-3
 MAX_ADAPTIVE_LEVEL = 4.0
 
 
+@njit(cache=True)
 def melt_width_for_rtol(rtol, level=0.0):
     """Width of the smoothed melting step [K] for tolerance ``rtol`` at ``level``.
 
@@ -126,6 +129,7 @@ def root_tolerance(rtol, level, extrapolate, melt_width):
     return max(ROOT_SHARE * rtol, rtol - discretisation - melt)
 
 
+@njit(cache=True)
 def modelled_error(level):
     """Modelled relative discretisation error of the critical height at ``level`` [1]."""
     return ERROR_LEVEL0 * 4.0 ** (-level)
@@ -144,6 +148,7 @@ def level_for_rtol(rtol):
         math.log(ERROR_LEVEL0 / (DISCRETISATION_SHARE * rtol)) / math.log(4.0))
 
 
+@njit(cache=True)
 def extrapolated_error(level):
     """Modelled relative error of the Richardson value of levels ``level - 1`` and ``level`` [1]."""
     return RICHARDSON_ERROR_LEVEL0 * 4.0 ** (-level)
@@ -179,6 +184,7 @@ def first_pair_level(rtol):
     return max(RICHARDSON_MIN_LEVEL, float(level))
 
 
+@njit(cache=True)
 def a_posteriori_error(correction, coarse_level):
     """Estimated discretisation error of a Richardson value [1], from its own pair.
 
@@ -221,6 +227,7 @@ def melt_bias(terms, melt_width, level):
     return MELT_WIDTH_BIAS_PER_K * melt_width
 
 
+@njit(cache=True)
 def predicted_correction(level):
     """Likely size of the Richardson correction |c| of the pair ``(level - 1, level)`` [1].
 
@@ -231,6 +238,7 @@ def predicted_correction(level):
     return LIKELY_CORRECTION_FRACTION * 0.25 * ERROR_LEVEL0 * 4.0 ** (-(level - 1.0))
 
 
+@njit(cache=True)
 def pair_root_tolerance(rtol, level, melt_width):
     """First tolerance of the root finder on ln H [1] for a default search's pair at ``level``.
 
