@@ -254,7 +254,7 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     from skidmc.physics.fast import CENSOR_ABOVE, CENSOR_BELOW, CENSOR_NONE
     from skidmc.physics.mechanics import EXIT_KINDS
     from skidmc.solver import device
-    from skidmc.solver.fast import SCENE_FIELDS
+    from skidmc.solver.fast import SCENE_FIELDS, _scene_values
     from skidmc.solver.model import build_model
     from skidmc.solver.results import HeightResult
 
@@ -268,7 +268,7 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     if fallback is None:
         from skidmc.solver.search import critical_height as fallback
     scenes = list(scenes)
-    rows = np.array([[float(getattr(s, f)) for f in SCENE_FIELDS] for s in scenes],
+    rows = np.array([_scene_values(s) for s in scenes],
                     dtype=np.float64).reshape(len(scenes), len(SCENE_FIELDS))
     out, _ = critical_heights(rows, rtol, h_min, h_max, backend=backend, melting=melting,
                               runaway_fraction=runaway_fraction)
