@@ -15,12 +15,16 @@ from test_extremes import _rate_at_ref
 
 from skidmc.scene import get_preset, make_scene
 from skidmc.solver import critical_height
+from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K
 from skidmc.solver.plan import (
     MAX_ROOT_TOLERANCE,
     ROOT_SHARE,
+    a_posteriori_error,
     first_pair_level,
+    jump_root_tolerances,
     melt_width_for_rtol,
     pair_root_tolerance,
+    predicted_correction,
 )
 from skidmc.solver.search import _search, _tighten
 
@@ -32,6 +36,36 @@ def test_pair_root_tolerance_is_the_room_left_or_the_root_share(rtol):
     assert x_tol >= ROOT_SHARE * rtol * (1 - 1e-12)
     assert x_tol <= max(MAX_ROOT_TOLERANCE, ROOT_SHARE * rtol)
     assert x_tol < rtol
+
+
+@pytest.mark.parametrize("rtol", [3e-2, 1e-2, 3e-3, 1e-3, 1e-4])
+def test_jump_root_tolerances_spend_the_room_where_halvings_are_fewest(rtol):
+    level = first_pair_level(rtol)
+    width = melt_width_for_rtol(rtol, level)
+    coarse, fine = jump_root_tolerances(rtol, level, width)
+    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0)
+                 + MELT_WIDTH_BIAS_PER_K * width)
+    room = max(ROOT_SHARE * rtol, rtol - predicted)
+    # The Richardson value's root error (4 fine + coarse) / 3 fills the room the pair is likely
+    # to leave (at least ROOT_SHARE rtol) unless the widest bracket caps both; split 4:1,
+    # where the halvings -ln(coarse) - ln(fine) are fewest for that sum.
+    assert max(coarse, fine) <= MAX_ROOT_TOLERANCE
+    assert (4.0 * fine + coarse) / 3.0 <= room * (1 + 1e-12)
+    if coarse < MAX_ROOT_TOLERANCE:
+        assert coarse == pytest.approx(4.0 * fine)
+        assert (4.0 * fine + coarse) / 3.0 == pytest.approx(room)
+
+
+@pytest.mark.parametrize("rtol", [1e-2, 3e-3, 1e-3])
+def test_stops_sliding_takes_at_most_twice_the_simulations_of_rebound(rtol):
+    # Issue 16: paper-gold (sliding stops, the margin jumps at the root) against the two
+    # rebound presets of the report's first series. Simulation counts are deterministic.
+    gold = critical_height(get_preset("paper-gold"), rtol=rtol)
+    rebound = [critical_height(get_preset(name), rtol=rtol).evaluations
+               for name in ("paper-quartz", "paper-alumina-smooth")]
+    assert gold.exit_kind == "stops_sliding"
+    assert gold.error_estimate <= rtol
+    assert gold.evaluations <= 2 * max(rebound)
 
 
 def test_the_studies_rtol_gets_a_looser_root():

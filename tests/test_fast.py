@@ -362,3 +362,22 @@ def test_fast_stated_error_by_region_and_strict_refusal():
     for name in ("stops", "self"):
         with pytest.raises(SceneError):
             fast_critical_height(scenes[name], strict=True)
+
+
+def test_stops_sliding_factor_scales_only_where_sliding_stops():
+    from skidmc.physics.fast import STOPS_SLIDING_FACTOR
+    from skidmc.scene import get_preset
+    from skidmc.solver.fast import fast_critical_height
+
+    # The fitted factor multiplies the reduced model's height where sliding stops (paper-gold)
+    # and nowhere else (paper-quartz rebounds); the root is found to 1e-6 in ln H either way.
+    for name, factor in (("paper-gold", STOPS_SLIDING_FACTOR), ("paper-quartz", 1.0)):
+        scene = get_preset(name)
+        raw = fast_critical_height(scene, stops_factor=1.0).critical_height
+        assert fast_critical_height(scene).critical_height == pytest.approx(factor * raw,
+                                                                            rel=1e-5)
+    # A bound between the unscaled and the scaled height censors the scaled one.
+    gold = get_preset("paper-gold")
+    raw = fast_critical_height(gold, stops_factor=1.0).critical_height
+    batch = fast_critical_heights(h_max=1.01 * raw, **scene_columns([gold]))
+    assert batch["censored"][0] == CENSOR_ABOVE and batch["critical_height"][0] == 1.01 * raw

@@ -305,3 +305,73 @@ def test_go_side_search_agrees_with_bisection_on_the_same_mesh(name):
     bisect = critical_height(scene, rtol=rtol, model=model, method="bisection")
     assert abs(math.log(go.critical_height / bisect.critical_height)) < 0.4 * rtol
     assert go.evaluations <= 4 < bisect.evaluations
+
+
+def _jump_margin(root, nogo=0.12, go_at_root=-0.28):
+    """A margin shaped like a stops-sliding scene's (paper-gold, level 0): nearly flat and
+    positive below the root, a jump of ~0.4 at it, and a go side that falls off as
+    (x - root)^0.45; counts its evaluations."""
+    calls = []
+
+    def margin(x):
+        calls.append(x)
+        d = x - root
+        return nogo - 0.5 * d if d < 0.0 else go_at_root - 1.5 * d ** 0.45
+
+    return margin, calls
+
+
+@pytest.mark.parametrize("offset_sigmas, most", [(-0.7, 9), (0.0, 8), (0.3, 8), (1.5, 10),
+                                                 (-2.0, 12)])
+def test_prior_bisection_finds_a_jump_in_about_log2_of_its_prior_over_the_bracket(
+        offset_sigmas, most):
+    from skidmc.solver.roots import prior_bisection_root
+
+    # Halving the prior's mass reaches a bracket of 2 x_tol from a root within ~1 sigma of the
+    # guess in about log2(4.13 sigma / (2 x_tol)) = 7 simulations (+1 for rounding, +1 for the
+    # halving's unevenness at 0.7 sigma); a root 1.5-2 sigma off costs 2-4 more (the tail).
+    sigma, x_tol, root = 0.02, 3e-4, 5.118
+    margin, calls = _jump_margin(root)
+    x = prior_bisection_root(margin, root - offset_sigmas * sigma, sigma, x_tol, -10.0, 10.0)
+    assert abs(x - root) <= x_tol
+    assert len(calls) <= most
+
+
+def test_prior_bisection_steps_out_of_a_prior_that_is_far_off():
+    from skidmc.solver.roots import prior_bisection_root
+
+    # The root 10 sigma above the guess: 4 points halve the prior (z = 0 ... 1.53), 3 double
+    # the distance (z = 3.1, 6.1, 12.3), then ln H is bisected from 6.1 sigma = 0.12 down to
+    # 2 x_tol (8 halvings): 15, and 2 to spare for where the halvings fall.
+    sigma, x_tol, root = 0.02, 3e-4, 0.2
+    margin, calls = _jump_margin(root)
+    x = prior_bisection_root(margin, root - 10 * sigma, sigma, x_tol, -10.0, 10.0)
+    assert abs(x - root) <= x_tol
+    assert len(calls) <= 17
+
+
+def test_prior_bisection_hands_a_smooth_bracket_to_interpolation():
+    from skidmc.solver.roots import prior_bisection_root
+
+    # A margin that does not jump (the kinked rebound shape): once bracketed, the linear
+    # interpolation of guided_root finishes in fewer simulations than bisection would.
+    sigma, x_tol, root = 0.02, 1.2e-4, 0.3
+    margin, calls = _kinked_margin(root)
+    x = prior_bisection_root(margin, root + 0.01, sigma, x_tol, -10.0, 10.0)
+    assert abs(x - root) <= x_tol
+    assert len(calls) <= 6
+
+
+def test_prior_bisection_continues_a_known_bracket_in_ln_h():
+    from skidmc.solver.roots import prior_bisection_root
+
+    # A re-search at a 4x tighter tolerance from its own bracket (2 x 1.2e-3 wide): two
+    # halvings, no simulation outside the bracket.
+    root, x_tol = 1.0, 3e-4
+    margin, calls = _jump_margin(root)
+    lo, hi = root - 0.0007, root + 0.0017
+    points = [(lo, margin(lo)), (hi, margin(hi))]
+    calls.clear()
+    x = prior_bisection_root(margin, root + 0.0005, 0.0004, x_tol, -10.0, 10.0, points=points)
+    assert abs(x - root) <= x_tol
+    assert len(calls) == 2 and all(lo < c < hi for c in calls)

@@ -44,6 +44,7 @@ from skidmc.physics.fast import (
     CENSOR_NONE,
     MELT_FACTOR,
     N_TIMES,
+    STOPS_SLIDING_FACTOR,
     fast_height_core,
 )
 from skidmc.physics.mechanics import STANDARD_GRAVITY, impact_constants
@@ -387,7 +388,8 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, x_tol, melt
     h_fast, censor_fast, _, _, _ = fast_height_core(
         mu, row[_SIGMA], row[_MASS], row[_DIAMETER], row[_ANGLE], row[_TILT], row[_T0],
         row[_HE_RHO], row[_HE_C], row[_HE_K], latent, row[_HE_TM], row[_Z], row[_TA], row[_Q],
-        row[_TG_RHO], row[_TG_C], row[_TG_K], h_min, h_max, C_IGNITION, MELT_FACTOR, table,
+        row[_TG_RHO], row[_TG_C], row[_TG_K], h_min, h_max, C_IGNITION, MELT_FACTOR,
+        STOPS_SLIDING_FACTOR, table,
         gl_x, gl_w, N_TIMES, fast_work[0], fast_work[1], fast_work[2])
     if censor_fast == CENSOR_NONE and h_fast > 0.0:
         x_guess, guess_error = math.log(h_fast), FAST_GUESS_ERROR

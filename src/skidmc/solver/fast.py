@@ -29,6 +29,7 @@ from skidmc.physics.fast import (
     MELT_FACTOR,
     MELT_TABLE,
     N_TIMES,
+    STOPS_SLIDING_FACTOR,
     duhamel_theta,
     fast_height_kernel,
     fast_heights_kernel,
@@ -131,7 +132,8 @@ def _censor_near_bounds(height, censored, error, h_min, h_max):
 
 
 def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,
-                         melt_factor=MELT_FACTOR, strict=False):
+                         melt_factor=MELT_FACTOR, stops_factor=STOPS_SLIDING_FACTOR,
+                         strict=False):
     """Critical drop height of a scene by the fast (reduced) tier [m].
 
     Parameters
@@ -142,9 +144,9 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
         "below".
     melting : bool
         Account for melting of the HE (as the full model's switch).
-    c_ign, melt_factor : float
-        The fitted constants (defaults :data:`C_IGNITION`, :data:`MELT_FACTOR`), exposed for the
-        fit in ``scripts/fast_tier_error.py``.
+    c_ign, melt_factor, stops_factor : float
+        The fitted constants (defaults :data:`C_IGNITION`, :data:`MELT_FACTOR`,
+        :data:`STOPS_SLIDING_FACTOR`), exposed for the fit in ``scripts/fast_tier_error.py``.
 
     strict : bool
         Refuse (raise :class:`SceneError`) scenes in the regions where the tier is known to
@@ -172,8 +174,8 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
     if not melting:
         args[10] = 0.0
     h, cens, t_exit, ecode, _ = fast_height_kernel(
-        *args, float(h_min), float(h_max), float(c_ign), float(melt_factor), MELT_TABLE,
-        _GL_X01, _GL_W01, N_TIMES)
+        *args, float(h_min), float(h_max), float(c_ign), float(melt_factor),
+        float(stops_factor), MELT_TABLE, _GL_X01, _GL_W01, N_TIMES)
     censored = _CENSOR_NAMES[int(cens)]
     height = {"above": h_max, "below": h_min}.get(censored, float(h))
     height, censored = _censor_near_bounds(height, censored, error, h_min, h_max)
@@ -185,7 +187,8 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
 
 
 def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,
-                          melt_factor=MELT_FACTOR, **columns):
+                          melt_factor=MELT_FACTOR, stops_factor=STOPS_SLIDING_FACTOR,
+                          **columns):
     """Critical heights of many scenes in one compiled call [m].
 
     Parameters
@@ -194,7 +197,7 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
         Search bounds [m].
     melting : bool
         Account for melting.
-    c_ign, melt_factor : float
+    c_ign, melt_factor, stops_factor : float
         Fitted constants.
     **columns : array_like
         One 1-D array (or scalar, broadcast) per name of :data:`SCENE_FIELDS` (Scene attribute
@@ -230,7 +233,8 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
     out_t = np.empty(n)
     out_e = np.empty(n, dtype=np.int64)
     fast_heights_kernel(*arrays, float(h_min), float(h_max), float(c_ign), float(melt_factor),
-                        MELT_TABLE, _GL_X01, _GL_W01, N_TIMES, out_h, out_c, out_t, out_e)
+                        float(stops_factor), MELT_TABLE, _GL_X01, _GL_W01, N_TIMES, out_h, out_c,
+                        out_t, out_e)
     col = dict(zip(SCENE_FIELDS, arrays))
     error = np.where(_self_heating(col), ERROR_SELF_HEATING,
                      np.where(out_e == EXIT_STOPS_SLIDING, ERROR_STOPS_SLIDING, ERROR_ESTIMATE))

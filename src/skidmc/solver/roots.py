@@ -8,6 +8,7 @@ The finders differ in what they know beforehand: a guess and a slope (:func:`go_
 from __future__ import annotations
 
 import math
+from statistics import NormalDist
 
 from scipy.optimize import brentq
 
@@ -22,12 +23,15 @@ __all__ = [
     "GO_BEND",
     "GO_SECANT_SPAN",
     "JUMP_SLOPE",
+    "PRIOR_TAIL",
+    "PRIOR_TAIL_Z",
     "bisection_root",
     "brent_root",
     "go_side_root",
     "go_side_slope",
     "guided_root",
     "margin_slope",
+    "prior_bisection_root",
 ]
 
 _EPS = 2.220446049250313e-16  # float64 machine epsilon, np.finfo(float).eps
@@ -276,6 +280,80 @@ def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=40, *, s
                 slope = secant_slope
         record(x, m)
         previous = (x, m)
+    return None
+
+
+#: Prior probability inside a bracket below which :func:`prior_bisection_root` stops placing
+#: its points by the prior (the guess was off by more than its scatter) and bisects in ln H.
+PRIOR_TAIL = 0.01
+#: One-sided, beyond this many sigma from the guess :func:`prior_bisection_root` steps out in
+#: doubling multiples of its distance instead of halving the prior's tail.
+PRIOR_TAIL_Z = 1.5
+
+_STANDARD_NORMAL = NormalDist()
+
+
+def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max, max_simulations=40, *,
+                         slope=None, points=()):
+    """Root of a margin that may jump at its root, from a guess with a known spread; or None.
+
+    Where sliding stops before rebound the margin jumps at the root (:func:`_is_jump`): its
+    values say nothing about where the root lies, only their signs do. With the root's prior
+    ln H ~ N(``x_guess``, ``sigma``^2) (the guess's measured scatter), each simulation is placed
+    at the prior's median inside the current bracket (one end may still be missing), which
+    halves the prior probability left. A bracket holding less than :data:`PRIOR_TAIL` of it, or
+    one known beforehand (a re-search at a tighter tolerance) is bisected in ln H; a missing end
+    beyond :data:`PRIOR_TAIL_Z` sigma (the guess off by more than its scatter) is sought in
+    steps that double the distance from the guess. From a
+    fast-tier guess with sigma = 2 % a bracket of 2 ``x_tol`` = 6e-4 takes ~7 simulations,
+    against ~10 for stepping out along the margin's slope and then bisecting. A jump bracket
+    is accepted when at most ``2 x_tol`` wide (its midpoint, error <= x_tol); a bracket
+    across which the margin is smooth is handed to :func:`guided_root` (linear
+    interpolation; ``slope`` as there). Returns None when the steps leave [x_min, x_max],
+    meet a non-finite margin or contradict monotonicity: the caller then brackets and runs
+    Brent's method, reusing every simulation.
+    """
+    lo = hi = None  # (x, m) of the closest no-go (m > 0) and go (m <= 0) points
+    for x, m in points:
+        if m > 0.0 and (lo is None or x > lo[0]):
+            lo = (x, m)
+        elif m <= 0.0 and (hi is None or x < hi[0]):
+            hi = (x, m)
+    # A re-search at a tighter tolerance starts from its own bracket: inside it the prior
+    # says no more than the bracket does, so it is bisected in ln H.
+    flat = lo is not None and hi is not None
+    for _ in range(max_simulations):
+        if lo is not None and hi is not None:
+            if lo[0] >= hi[0]:
+                return None  # not monotone at this scale: leave it to Brent
+            if not _is_jump(lo, hi):
+                root = lo[0] + lo[1] * (hi[0] - lo[0]) / (lo[1] - hi[1])
+                return guided_root(margin, root, slope, x_tol, x_min, x_max,
+                                   points=[lo, hi])
+            if hi[0] - lo[0] <= 2.0 * x_tol:
+                return 0.5 * (lo[0] + hi[0])
+        z_lo = -math.inf if lo is None else (lo[0] - x_guess) / sigma
+        z_hi = math.inf if hi is None else (hi[0] - x_guess) / sigma
+        if hi is None and z_lo >= PRIOR_TAIL_Z:
+            # The guess is off by more than its scatter: halving the prior's tail would creep
+            # (z = 1.53, 1.85, 2.14, ...); step out in doubling multiples of z instead.
+            x = x_guess + 2.0 * z_lo * sigma
+        elif lo is None and z_hi <= -PRIOR_TAIL_Z:
+            x = x_guess + 2.0 * z_hi * sigma
+        else:
+            p_lo = _STANDARD_NORMAL.cdf(z_lo) if lo is not None else 0.0
+            p_hi = _STANDARD_NORMAL.cdf(z_hi) if hi is not None else 1.0
+            if lo is not None and hi is not None and (flat or p_hi - p_lo < PRIOR_TAIL):
+                x = 0.5 * (lo[0] + hi[0])
+            else:
+                x = x_guess + sigma * _STANDARD_NORMAL.inv_cdf(0.5 * (p_lo + p_hi))
+        m = _margin_inside(margin, x, x_min, x_max)
+        if m is None:
+            return None
+        if m > 0.0 and (lo is None or x > lo[0]):
+            lo = (x, m)
+        elif m <= 0.0 and (hi is None or x < hi[0]):
+            hi = (x, m)
     return None
 
 

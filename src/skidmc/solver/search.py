@@ -30,6 +30,7 @@ from skidmc.solver.plan import (
     a_posteriori_error,
     extrapolated_error,
     first_pair_level,
+    jump_root_tolerances,
     melt_bias,
     melt_bias_bound,
     melt_width_for_rtol,
@@ -46,12 +47,13 @@ from skidmc.solver.roots import (
     brent_root,
     go_side_root,
     go_side_slope,
-    guided_root,
     margin_slope,
+    prior_bisection_root,
 )
 from skidmc.solver.simulate import simulate
 
-__all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "MAX_ADAPTIVE_ROUNDS",
+__all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "FAST_STOPS_SLIDING_SPREAD",
+           "MAX_ADAPTIVE_ROUNDS",
            "MELT_SHIFT_FACTOR", "TIERS", "critical_height"]
 
 #: Most corrections (tightened roots, a narrower melting width, a finer pair) the default
@@ -66,6 +68,13 @@ MELT_SHIFT_FACTOR = 2.5
 #: Model fidelity tiers: "full" (the report's model, converged to rtol) and "fast" (the
 #: reduced model of :mod:`skidmc.fast`, ~10-20 us per height, a few percent off the full model).
 TIERS = ("full", "fast")
+
+#: Scatter of the fast tier's ln H about the full model's where sliding stops [1], the prior's
+#: spread of a stops-sliding search from the fast tier's height
+#: (:func:`skidmc.solver.roots.prior_bisection_root`): sd 0.016 on the training scenes of
+#: scripts/fast_tier_error.py after :data:`skidmc.physics.fast.STOPS_SLIDING_FACTOR`,
+#: rounded up. A guess further off costs doubling steps, never a wrong root.
+FAST_STOPS_SLIDING_SPREAD = 0.02
 
 #: Default search bounds [m]: 1 mm to 10 km of drop height.
 DEFAULT_H_MIN = 1e-3
@@ -166,23 +175,26 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
     # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
     coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
-    fine = _fine_search(scene, rtol, level, 0.5 * x_tol, coarse, common)
+    fine = _fine_search(scene, rtol, level, 0.5 * x_tol, coarse, x_tol, common)
     res = _richardson(coarse, fine, x_tol, melt_width, False)
     res.evaluations = coarse.evaluations + fine.evaluations
     res.wall_time = time.perf_counter() - start
     return res
 
 
-def _fine_search(scene, rtol, level, x_tol, coarse, common):
+def _fine_search(scene, rtol, level, x_tol, coarse, coarse_tol, common):
     """The fine search of a Richardson pair, started from its coarse search's root and slopes.
 
     The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
     errors are negative and shrink 4x per level; the fine level keeps 1/4 of it): the go-side
-    search starts that far up, which lands on the go side within the error model.
+    search starts that far up, which lands on the go side within the error model. Where the
+    margin jumps (sliding stops), the coarse root's own tolerance ``coarse_tol`` [1] widens
+    the prior of the fine root (:func:`skidmc.solver.roots.prior_bisection_root`).
     """
+    overshoot = 0.75 * modelled_error(level - 1.0)
     return _search(scene, rtol, level, x_tol,
                    h_guess=coarse.critical_height if coarse.censored is None else None,
-                   overshoot=0.75 * modelled_error(level - 1.0),
+                   overshoot=overshoot, guess_sigma=overshoot / 6.0 + 0.5 * coarse_tol,
                    slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history),
                    **common)
 
@@ -213,10 +225,14 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
       narrow further: then the estimate stays above rtol and says so.
     """
     melt_width = common["melt_width"]
-    x_tol = pair_root_tolerance(rtol, level, melt_width)
-    coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
-    coarse_tol, fine_tol = x_tol, 0.5 * x_tol
-    fine = _fine_search(scene, rtol, level, fine_tol, coarse, common)
+    if build_model(scene, level=level, melting=common["melting"],
+                   meshes=False).exit_kind == "stops_sliding":
+        coarse_tol, fine_tol = jump_root_tolerances(rtol, level, melt_width)
+    else:
+        coarse_tol = pair_root_tolerance(rtol, level, melt_width)
+        fine_tol = 0.5 * coarse_tol
+    coarse = _search(scene, rtol, level - 1.0, coarse_tol, h_guess=h_guess, **common)
+    fine = _fine_search(scene, rtol, level, fine_tol, coarse, coarse_tol, common)
     evaluations = coarse.evaluations + fine.evaluations
     melt, extra = _melt_width_bias(scene, coarse, common)
     evaluations += extra
@@ -255,7 +271,7 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
                              slope=margin_slope(coarse.history),
                              go_slope=go_side_slope(coarse.history), **common)
             coarse_tol, fine_tol = x_tol, 0.5 * x_tol
-            fine = _fine_search(scene, rtol, fine.level, fine_tol, coarse, common)
+            fine = _fine_search(scene, rtol, fine.level, fine_tol, coarse, coarse_tol, common)
             melt, extra = _melt_width_bias(scene, coarse, common)
             evaluations += coarse.evaluations + fine.evaluations + extra
         elif fine.level + 1.0 <= MAX_ADAPTIVE_LEVEL and (
@@ -372,7 +388,7 @@ def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None):
 
 def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
             melt_width, model=None, h_guess=None, overshoot=None, slope=None, go_slope=None,
-            known=()):
+            known=(), guess_sigma=None):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
@@ -398,6 +414,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         return HeightResult(critical_height=h_max, censored="above", evaluations=0, **base)
 
     coarse_evaluations = 0
+    from_fast_tier = False
     if method == "brent" and h_guess is None and own_model and level >= COARSE_GAP:
         coarse = _search(scene, rtol, level - COARSE_GAP,
                          max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)), h_min=h_min,
@@ -413,7 +430,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     elif method == "brent" and h_guess is None and own_model:
         fast = _fast_guess(scene, h_min, h_max, melting)
         if fast is not None:
-            h_guess, overshoot = fast, FAST_GUESS_ERROR
+            h_guess, overshoot, from_fast_tier = fast, FAST_GUESS_ERROR, True
 
     cache = {math.log(h): m for h, m in known}
     n_known = len(cache)
@@ -433,11 +450,19 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
                                guess_error=overshoot or FAST_GUESS_ERROR, points=points)
         censored = None
     elif h_guess is not None:
-        # Sliding stops before rebound: the margin may jump at the root. Start at the predicted
-        # root, half the guess's uncertainty up, and bracket it within that uncertainty.
-        spread = 0.5 * (overshoot or FAST_GUESS_ERROR)
-        x_root, censored = guided_root(margin, math.log(h_guess) + spread, slope, x_tol, x_min,
-                                       x_max, spread=spread, points=points), None
+        # Sliding stops before rebound: the margin jumps at the root, so only the signs of its
+        # values locate it. The prior of the root: the fast tier's height and its measured
+        # scatter there, or (a coarser level's root, a re-search) half the guess's uncertainty
+        # up, with a third of that as its spread (the fine root of a Richardson pair lies
+        # 0.30-0.46 of the coarse level's modelled error above the coarse one on the
+        # stops-sliding scenes of benchmarks/solver.py; the guess starts at 0.375).
+        if from_fast_tier:
+            center, sigma = math.log(h_guess), FAST_STOPS_SLIDING_SPREAD
+        else:
+            spread = 0.5 * (overshoot or FAST_GUESS_ERROR)
+            center, sigma = math.log(h_guess) + spread, guess_sigma or spread / 3.0
+        x_root, censored = prior_bisection_root(margin, center, sigma, x_tol, x_min, x_max,
+                                                slope=slope, points=points), None
     if x_root is None:
         x_root, censored = brent_root(margin, x_min, x_max, x_tol,
                                        math.log(model.end_time / model.exit_time), h_guess,
