@@ -331,8 +331,9 @@ def test_batched_inputs_are_validated_like_scenes():
 
 
 def test_fast_height_within_its_error_of_h_max_is_censored_above():
-    # phi = 1 deg: the fast tier found 9,647 m, 3.5 % below h_max = 10 km, where the full tier
-    # finds no event up to h_max; within its stated error (7 %, sliding stops) it cannot tell.
+    # phi = 1 deg: the fast tier found 9,647 m, 3.5 % below h_max = 10 km, before its
+    # stops-sliding factor (1.039), where the full tier finds no event up to h_max; within its
+    # stated error it cannot tell (and with the factor it finds no event either).
     from skidmc.scene import make_scene
     from skidmc.solver import critical_height
 

@@ -71,11 +71,14 @@ Model (report equation numbers in parentheses)
 
 Fitted constants
 ----------------
-Exactly two dimensionless O(1) constants, :data:`C_IGNITION` and :data:`MELT_FACTOR`, were fitted
+Two dimensionless O(1) constants, :data:`C_IGNITION` and :data:`MELT_FACTOR`, were fitted
 (least squares on ln H) to the FULL model (``skidmc.solver.critical_height(rtol=1e-2)``, melting
 on) over a *training* set of scenes (``python scripts/fast_tier_error.py --fit``: the first rows of
-the two shipped studies' designs and a broad random set, seed 1); the error quoted in
-:data:`ERROR_ESTIMATE` is measured on a separate *test* set (later design rows, broad seed 2).
+the two shipped studies' designs and a broad random set, seed 1); a third,
+:data:`STOPS_SLIDING_FACTOR`, scales the height where sliding stops before rebound (exp of the
+training scenes' mean ln H_full / H_fast there, the other two fixed). The errors quoted in
+:data:`ERROR_ESTIMATE` and :data:`ERROR_STOPS_SLIDING` are measured on a separate *test* set
+(later design rows, broad seed 2).
 Nothing was tuned to the report's printed numbers.
 
 Units: SI throughout, temperatures in K, angles in degrees at the public interface.
@@ -136,9 +139,10 @@ STOPS_SLIDING_FACTOR = 1.039
 #: (341 scenes, results/benchmarks/fast_tier.md). Rebound exits: |H_fast / H_full - 1| has p95
 #: 5.0 %, max 10.8 % on the training set; 6 % covers ~97 % of the test set.
 ERROR_ESTIMATE = 0.06
-#: The same where sliding stops before rebound (the reduced model's heating pulse ends abruptly;
-#: training max 6.1 %, test max 6.3 %, the issue's 5.6 %).
-ERROR_STOPS_SLIDING = 0.07
+#: The same where sliding stops before rebound, after :data:`STOPS_SLIDING_FACTOR`: training
+#: max 2.7 % (31 scenes), 4 % leaves 50 % to spare; test max 2.8 %, 100 % of 59 covered (was
+#: 7 % without the factor: training max 6.1 %, test 6.3 %).
+ERROR_STOPS_SLIDING = 0.04
 #: The same where the unheated HE runs away within the hour (flag "self_heating": the reduced
 #: model has no bulk self-heating; +11.5 % on E/R = 15,000 K with the report's prefactor, +4 % at
 #: T0 = 450 K; too few scenes for a bound with a coverage: the tier's ``strict`` mode refuses
