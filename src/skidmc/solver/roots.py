@@ -2,7 +2,8 @@
 
 ``margin(x)`` runs (or recalls) one simulation and returns ln(t_ev / t_exit): go <=> m <= 0.
 The finders differ in what they know beforehand: a guess and a slope (:func:`go_side_root`,
-:func:`guided_root`), nothing (:func:`brent_root`, :func:`bisection_root`).
+:func:`guided_root`), a guess and its scatter (:func:`prior_bisection_root`), nothing
+(:func:`brent_root`, :func:`bisection_root`).
 """
 
 from __future__ import annotations

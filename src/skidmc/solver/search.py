@@ -393,11 +393,13 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
     from the root found at ``level - COARSE_GAP`` (levels >= COARSE_GAP) or from the fast
-    tier's height. From a guess, steps that bracket the predicted root (:func:`guided_root`)
-    usually converge in 3-4 simulations; otherwise bracketing and Brent's method take over,
-    reusing every simulation done. ``known``: (H [m], margin) already simulated with this
-    search's model (a search repeated at a tighter tolerance): reused, and counted only in the
-    earlier search's evaluations.
+    tier's height. From a guess, a rebound exit's root is extrapolated along the go side
+    (:func:`~skidmc.solver.roots.go_side_root`, 1-3 simulations); where sliding stops, the
+    root's prior is bisected (:func:`~skidmc.solver.roots.prior_bisection_root`; its spread is
+    ``guess_sigma`` [1, in ln H] when given). Otherwise bracketing and Brent's method take
+    over, reusing every simulation done. ``known``: (H [m], margin) already simulated with
+    this search's model (a search repeated at a tighter tolerance): reused, and counted only
+    in the earlier search's evaluations.
     """
     own_model = model is None
     if own_model:
