@@ -21,6 +21,7 @@ import math
 import time
 
 from skidmc.errors import SceneError
+from skidmc.physics.mechanics import EXIT_STOPS_SLIDING, impact_constants
 from skidmc.solver.model import build_model, melt_width_floor
 from skidmc.solver.plan import (
     MAX_ADAPTIVE_LEVEL,
@@ -225,8 +226,8 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
       narrow further: then the estimate stays above rtol and says so.
     """
     melt_width = common["melt_width"]
-    if build_model(scene, level=level, melting=common["melting"],
-                   meshes=False).exit_kind == "stops_sliding":
+    if impact_constants(scene.mu, scene.flow_stress, scene.billet_mass, scene.billet_diameter,
+                        scene.angle, scene.tilt)[3] == EXIT_STOPS_SLIDING:
         coarse_tol, fine_tol = jump_root_tolerances(rtol, level, melt_width)
     else:
         coarse_tol = pair_root_tolerance(rtol, level, melt_width)
