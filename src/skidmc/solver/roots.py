@@ -209,6 +209,16 @@ def _is_jump(lo, hi):
     return (lo[1] - hi[1]) > JUMP_SLOPE * (hi[0] - lo[0])
 
 
+def _closer_bracket(lo, hi, x, m):
+    """``(lo, hi)`` after the point (x, m): the highest no-go point (m > 0) and the lowest go
+    point (m <= 0) seen, each (x, m) or None."""
+    if m > 0.0 and (lo is None or x > lo[0]):
+        return (x, m), hi
+    if m <= 0.0 and (hi is None or x < hi[0]):
+        return lo, (x, m)
+    return lo, hi
+
+
 def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=40, *, spread=None,
                 points=()):
     """Root of the margin on ln H from a close guess ``x0``, always from a tight bracket; or None.
@@ -240,10 +250,7 @@ def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=40, *, s
 
     def record(x, m):
         nonlocal lo, hi
-        if m > 0.0 and (lo is None or x > lo[0]):
-            lo = (x, m)
-        elif m <= 0.0 and (hi is None or x < hi[0]):
-            hi = (x, m)
+        lo, hi = _closer_bracket(lo, hi, x, m)
 
     for x, m in points:
         record(x, m)
@@ -316,10 +323,7 @@ def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max, max_simula
     """
     lo = hi = None  # (x, m) of the closest no-go (m > 0) and go (m <= 0) points
     for x, m in points:
-        if m > 0.0 and (lo is None or x > lo[0]):
-            lo = (x, m)
-        elif m <= 0.0 and (hi is None or x < hi[0]):
-            hi = (x, m)
+        lo, hi = _closer_bracket(lo, hi, x, m)
     # A re-search at a tighter tolerance starts from its own bracket: inside it the prior
     # says no more than the bracket does, so it is bisected in ln H.
     flat = lo is not None and hi is not None
@@ -351,10 +355,7 @@ def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max, max_simula
         m = _margin_inside(margin, x, x_min, x_max)
         if m is None:
             return None
-        if m > 0.0 and (lo is None or x > lo[0]):
-            lo = (x, m)
-        elif m <= 0.0 and (hi is None or x < hi[0]):
-            hi = (x, m)
+        lo, hi = _closer_bracket(lo, hi, x, m)
     return None
 
 
