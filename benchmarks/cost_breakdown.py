@@ -58,15 +58,16 @@ def scenes():
     ]
 
 
-def resolution(level, *, mesh_level=None, time_level=None, first_fraction=None):
+def resolution(level, *, mesh_level=None, time_level=None, first_fraction=None,
+               melt_width=MELT_WIDTH):
     """A Resolution whose mesh comes from ``mesh_level`` and time tolerance from
     ``time_level`` (each defaulting to ``level``); ``first_fraction`` replaces the level-0 first
-    cell fraction (halved per level as the shipped levels do)."""
+    cell fraction (halved per level as the shipped levels do); melting step ``melt_width`` [K]."""
     cells, fraction, _ = level_resolution(level if mesh_level is None else mesh_level)
     _, _, tol = level_resolution(level if time_level is None else time_level)
     if first_fraction is not None:
         fraction = first_fraction * 2.0 ** -(level if mesh_level is None else mesh_level)
-    return Resolution(int(cells), float(fraction), float(tol), MELT_WIDTH)
+    return Resolution(int(cells), float(fraction), float(tol), float(melt_width))
 
 
 def height(scene, res, melting=True):
@@ -77,8 +78,7 @@ def height(scene, res, melting=True):
 
 def simulation_cost(scene, h, level, melt_width, melting=True, inert=False):
     """(median wall time [s], steps, rejected) of one simulation at ``h`` [m]."""
-    cells, fraction, tol = level_resolution(level)
-    model = build_model(scene, Resolution(int(cells), float(fraction), float(tol), melt_width),
+    model = build_model(scene, resolution(level, melt_width=melt_width),
                         melting=melting and not inert)
     if inert:
         model = dataclasses.replace(model, prefactor=0.0)
