@@ -55,10 +55,10 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import numpy as np  # noqa: E402
 import peer  # noqa: E402
 
 from skidmc.scene import get_preset, make_scene  # noqa: E402
+from skidmc.scene.validation import off_preset_scenes as box_scenes  # noqa: E402
 from skidmc.solver import FT, critical_height  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
@@ -71,35 +71,12 @@ PEER_SETTINGS = [(1e-3, 40), (1e-4, 80), (1e-5, 160)]
 REFERENCE_RTOL = 3e-5
 #: rtol values summarised per scene set (the issue's three).
 SUMMARY_RTOLS = [1e-2, 3e-3, 1e-3]
-#: Off-preset targets (SI): quartz, an alumina grade, mild steel, something in between.
-TARGETS = {
-    "quartz": {"target.conductivity": 1.69, "target.density": 2200.0,
-               "target.heat_capacity": 740.0},
-    "alumina": {"target.conductivity": 20.0, "target.density": 3700.0,
-                "target.heat_capacity": 880.0},
-    "steel": {"target.conductivity": 45.0, "target.density": 7850.0,
-              "target.heat_capacity": 475.0},
-    "between": {"target.conductivity": 6.0, "target.density": 3000.0,
-                "target.heat_capacity": 800.0},
-}
-
-
 def off_preset_scenes(n=16, seed=16):
-    """(label, scene) of the issue-16 box around paper-quartz, and E/R = 15,000 K twice: with
-    the rate at 575 K kept (as paper-series1 samples it) and with the report's prefactor (a
-    self-heating billet)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for i in range(n):
-        target = list(TARGETS)[i % 4]
-        angle = float(rng.uniform(20.0, 70.0))
-        vertical = bool(i % 2)
-        ov = {**TARGETS[target], "mu": float(math.exp(rng.uniform(math.log(0.04), math.log(0.3)))),
-              "flow_stress": float(rng.uniform(15.0, 45.0) * 6.894757e6),
-              "billet_mass": float(rng.uniform(5.0, 40.0) * 0.45359237),
-              "angle": angle, "tilt": angle if vertical else 0.0}
-        out.append((f"{target}-{'vertical' if vertical else 'pendulum'}-{i}",
-                    make_scene(preset="paper-quartz", **ov)))
+    """(label, scene) of the issue-16 box around paper-quartz
+    (:func:`skidmc.scene.validation.off_preset_scenes`), and E/R = 15,000 K twice: with the rate
+    at 575 K kept (as paper-series1 samples it) and with the report's prefactor (a self-heating
+    billet)."""
+    out = box_scenes(n, seed)
     rate_575 = 5e19 * math.exp(-26300.0 / 575.0 + 15000.0 / 575.0)
     out.append(("Ta15000-series1", make_scene(preset="paper-quartz", **{
         "kinetics.activation_temperature": 15000.0, "kinetics.prefactor": rate_575})))

@@ -17,51 +17,15 @@ against rtol = 3e-5 on the same scenes.
 
 from __future__ import annotations
 
-import math
-
-import numpy as np
 import pytest
 from test_extremes import CORNERS, H_MAX, H_MIN, ONE_AT_A_TIME, _rate_at_ref
 
 from skidmc.scene import get_preset, make_scene
+from skidmc.scene.validation import off_preset_scenes
 from skidmc.solver import critical_height
 
 PRESETS = ["paper-quartz", "paper-alumina-smooth", "paper-alumina-rough", "paper-gold",
            "paper2-quartz"]
-#: Targets of the off-preset scenes (SI): quartz, an alumina grade, mild steel, in between.
-TARGETS = {
-    "quartz": {"target.conductivity": 1.69, "target.density": 2200.0,
-               "target.heat_capacity": 740.0},
-    "alumina": {"target.conductivity": 20.0, "target.density": 3700.0,
-                "target.heat_capacity": 880.0},
-    "steel": {"target.conductivity": 45.0, "target.density": 7850.0,
-              "target.heat_capacity": 475.0},
-    "between": {"target.conductivity": 6.0, "target.density": 3000.0,
-                "target.heat_capacity": 800.0},
-}
-KSI = 6.894757e6     # [Pa]
-POUND = 0.45359237   # [kg]
-
-
-def off_preset_scenes(n=8, seed=16):
-    """(label, scene): the issue's off-preset box (mu 0.04-0.3, flow stress 15-45 ksi, mass
-    5-40 lb, phi 20-70 deg), targets and pendulum/vertical in turn."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for i in range(n):
-        target = list(TARGETS)[i % 4]
-        angle = float(rng.uniform(20.0, 70.0))
-        vertical = bool(i % 2)
-        overrides = {**TARGETS[target],
-                     "mu": float(math.exp(rng.uniform(math.log(0.04), math.log(0.3)))),
-                     "flow_stress": float(rng.uniform(15.0, 45.0) * KSI),
-                     "billet_mass": float(rng.uniform(5.0, 40.0) * POUND),
-                     "angle": angle, "tilt": angle if vertical else 0.0}
-        out.append((f"{target}-{'vertical' if vertical else 'pendulum'}-{i}",
-                    make_scene(preset="paper-quartz", **overrides)))
-    return out
-
-
 def scenes():
     out = [(name, get_preset(name)) for name in PRESETS]
     out += [(case[0], make_scene(preset=case[1], **case[2])) for case in ONE_AT_A_TIME + CORNERS]
@@ -71,7 +35,7 @@ def scenes():
     out += [("Ta=15000 gold", make_scene(preset="paper-gold", **{
         "kinetics.activation_temperature": 15000.0,
         "kinetics.prefactor": _rate_at_ref(15000.0, 575.0)}))]
-    return out + off_preset_scenes()
+    return out + off_preset_scenes(8)
 
 
 SCENES = scenes()
