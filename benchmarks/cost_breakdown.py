@@ -15,9 +15,14 @@ scenes, with the melting step at 1 K (the width rtol = 1e-3 sets, ``melt_width_f
    step controller resolves.
 3. **First cell.** The error at levels 0-2 with the first HE cell 0.25, 0.5 (the shipped
    ``BASE_RESOLUTION``) and 1.0 reaction zones wide at level 0.
+4. **Melting spread over each cell** (the experimental ``melt_spread`` option, off by default):
+   part 2's simulation with each HE cell's step widened to its own temperature range, and the
+   default search at rtol = 1e-3 with and without it over the report presets and the 16
+   off-preset scenes of ``benchmarks/solver.py``: time, simulations, error against a tight
+   solve of the default solver (rtol 3e-5) and the share of estimates that bound it.
 
 Writes results/benchmarks/cost_breakdown.{csv,md}. Run: ``python benchmarks/cost_breakdown.py``
-(~2 min on one core). Times are medians of repeats on a shared machine: read them as ratios.
+(~5 min on one core). Times are medians of repeats on a shared machine: read them as ratios.
 """
 
 from __future__ import annotations
@@ -31,7 +36,9 @@ import sys
 import time
 from pathlib import Path
 
+from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.scene import get_preset, make_scene
+from skidmc.scene.validation import off_preset_scenes
 from skidmc.solver import build_model, critical_height, simulate
 from skidmc.solver.model import BASE_RESOLUTION, Resolution, level_resolution
 
@@ -59,15 +66,17 @@ def scenes():
 
 
 def resolution(level, *, mesh_level=None, time_level=None, first_fraction=None,
-               melt_width=MELT_WIDTH):
+               melt_width=MELT_WIDTH, melt_spread=0.0):
     """A Resolution whose mesh comes from ``mesh_level`` and time tolerance from
     ``time_level`` (each defaulting to ``level``); ``first_fraction`` replaces the level-0 first
-    cell fraction (halved per level as the shipped levels do); melting step ``melt_width`` [K]."""
+    cell fraction (halved per level as the shipped levels do); melting step ``melt_width`` [K],
+    spread ``melt_spread`` [1]."""
     cells, fraction, _ = level_resolution(level if mesh_level is None else mesh_level)
     _, _, tol = level_resolution(level if time_level is None else time_level)
     if first_fraction is not None:
         fraction = first_fraction * 2.0 ** -(level if mesh_level is None else mesh_level)
-    return Resolution(int(cells), float(fraction), float(tol), float(melt_width))
+    return Resolution(int(cells), float(fraction), float(tol), float(melt_width),
+                      float(melt_spread))
 
 
 def height(scene, res, melting=True):
@@ -76,9 +85,9 @@ def height(scene, res, melting=True):
     return critical_height(scene, rtol=ROOT_RTOL, model=model).critical_height
 
 
-def simulation_cost(scene, h, level, melt_width, melting=True, inert=False):
+def simulation_cost(scene, h, level, melt_width, melting=True, inert=False, melt_spread=0.0):
     """(median wall time [s], steps, rejected) of one simulation at ``h`` [m]."""
-    model = build_model(scene, resolution(level, melt_width=melt_width),
+    model = build_model(scene, resolution(level, melt_width=melt_width, melt_spread=melt_spread),
                         melting=melting and not inert)
     if inert:
         model = dataclasses.replace(model, prefactor=0.0)
@@ -104,12 +113,15 @@ def main():
             split.append((label, level, total, space, tim))
             rows.append(("split", label, level, "", f"{total:.3e}", f"{space:.3e}",
                          f"{tim:.3e}", "", "", ""))
-        for variant, width, melting, inert in (("melting w = 1 K", 1.0, True, False),
-                                               ("melting w = 2 K", 2.0, True, False),
-                                               ("melting w = 4 K", 4.0, True, False),
-                                               ("no melting", 1.0, False, False),
-                                               ("inert", 1.0, False, True)):
-            wall, n_steps, n_rej = simulation_cost(scene, ref, 1.5, width, melting, inert)
+        for variant, width, melting, inert, spread in (
+                ("melting w = 1 K", 1.0, True, False, 0.0),
+                ("melting w = 2 K", 2.0, True, False, 0.0),
+                ("melting w = 4 K", 4.0, True, False, 0.0),
+                (f"melting w = 1 K, spread {MELT_SPREAD:g}", 1.0, True, False, MELT_SPREAD),
+                ("no melting", 1.0, False, False, 0.0),
+                ("inert", 1.0, False, True, 0.0)):
+            wall, n_steps, n_rej = simulation_cost(scene, ref, 1.5, width, melting, inert,
+                                                   spread)
             steps.append((label, variant, wall, n_steps, n_rej))
             rows.append(("steps", label, 1.5, variant, "", "", "", f"{wall:.4e}", n_steps, n_rej))
         for fraction in (0.25, BASE_RESOLUTION.first_cell_fraction, 1.0):
@@ -119,6 +131,11 @@ def main():
             for level, err in zip(LEVELS, errs):
                 rows.append(("first_cell", label, level, f"{fraction:g}", f"{err:.3e}", "", "",
                              "", "", ""))
+
+    spread_rows = spread_search()
+    for row in spread_rows:
+        rows.append(("spread_search", row[0], "", f"spread {row[1]:g}", f"{row[4]:.3e}", "", "",
+                     f"{row[2]:.4e}", row[3], ""))
 
     OUT.mkdir(parents=True, exist_ok=True)
     with open(OUT / "cost_breakdown.csv", "w", newline="") as fh:
@@ -155,8 +172,63 @@ def main():
     for label, fraction, errs in first:
         lines.append(f"| {label} | {fraction:g} | "
                      + " | ".join(f"{e:+.2e}" for e in errs) + " |")
+    lines += spread_lines(spread_rows)
     (OUT / "cost_breakdown.md").write_text("\n".join(lines) + "\n")
     print(f"wrote {OUT / 'cost_breakdown.md'}")
+
+
+SEARCH_RTOL = 1e-3
+SEARCH_REFERENCE_RTOL = 3e-5
+SEARCH_REPEATS = 3
+PRESETS = ("paper-quartz", "paper-alumina-smooth", "paper-alumina-rough", "paper-gold",
+           "paper2-quartz")
+
+
+def spread_search():
+    """Rows (scene, spread, median time [s], simulations, error, estimate) of the default search
+    at SEARCH_RTOL without and with the melting spread, errors against the default solver at
+    SEARCH_REFERENCE_RTOL."""
+    out = []
+    for label, scene in ([(name, get_preset(name)) for name in PRESETS] + off_preset_scenes()):
+        ref = critical_height(scene, rtol=SEARCH_REFERENCE_RTOL)
+        for spread in (0.0, MELT_SPREAD):
+            res = critical_height(scene, rtol=SEARCH_RTOL, melt_spread=spread)
+            times = []
+            for _ in range(SEARCH_REPEATS):
+                t0 = time.perf_counter()
+                res = critical_height(scene, rtol=SEARCH_RTOL, melt_spread=spread)
+                times.append(time.perf_counter() - t0)
+            if res.censored or ref.censored:
+                continue
+            error = abs(res.critical_height / ref.critical_height - 1.0)
+            out.append((label, spread, statistics.median(times), res.evaluations, error,
+                        res.error_estimate))
+        print(f"{label}: spread searches done", flush=True)
+    return out
+
+
+def spread_lines(rows):
+    """Markdown of part 4."""
+    lines = ["", f"## 4. Default search at rtol = {SEARCH_RTOL:g}, without and with the melting "
+             f"spread ({MELT_SPREAD:g})", "",
+             f"Error against the default solver at rtol = {SEARCH_REFERENCE_RTOL:g}; time the "
+             f"median of {SEARCH_REPEATS} repeats.", "",
+             "| scene | spread | time | simulations | error | estimate | error / estimate |",
+             "|---|---|---|---|---|---|---|"]
+    for label, spread, wall, sims, error, estimate in rows:
+        lines.append(f"| {label} | {spread:g} | {wall * 1e3:.1f} ms | {sims} | {error:.1e} | "
+                     f"{estimate:.1e} | {error / estimate:.2f} |")
+    lines += ["", "| spread | median time, presets | median time, all | worst error | "
+              "worst error / estimate | estimate bounds error |", "|---|---|---|---|---|---|"]
+    for spread in (0.0, MELT_SPREAD):
+        sel = [r for r in rows if r[1] == spread]
+        presets = [r[2] for r in sel if r[0] in PRESETS]
+        ratios = [r[4] / r[5] for r in sel]
+        lines.append(
+            f"| {spread:g} | {statistics.median(presets) * 1e3:.1f} ms | "
+            f"{statistics.median(r[2] for r in sel) * 1e3:.1f} ms | {max(r[4] for r in sel):.1e} | "
+            f"{max(ratios):.2f} | {sum(q <= 1.0 for q in ratios)}/{len(ratios)} |")
+    return lines
 
 
 if __name__ == "__main__":

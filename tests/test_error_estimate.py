@@ -20,6 +20,8 @@ from __future__ import annotations
 import pytest
 from test_extremes import CORNERS, H_MAX, H_MIN, ONE_AT_A_TIME, _rate_at_ref
 
+from skidmc.errors import SceneError
+from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.scene import get_preset, make_scene
 from skidmc.scene.validation import off_preset_scenes
 from skidmc.solver import critical_height
@@ -41,11 +43,12 @@ def scenes():
 SCENES = scenes()
 
 
-def _ratios(rtol, reference_rtol):
-    """|H / H_ref - 1| / error_estimate per uncensored scene; censoring must agree."""
+def _ratios(rtol, reference_rtol, **options):
+    """|H / H_ref - 1| / error_estimate per uncensored scene; censoring must agree. ``options``
+    go to the tested search only: the reference is the default solver's."""
     ratios = {}
     for name, scene in SCENES:
-        res = critical_height(scene, rtol=rtol, h_min=H_MIN, h_max=H_MAX)
+        res = critical_height(scene, rtol=rtol, h_min=H_MIN, h_max=H_MAX, **options)
         ref = critical_height(scene, rtol=reference_rtol, h_min=H_MIN, h_max=H_MAX)
         if res.censored is None:
             # The default search refines until its estimate meets rtol, unless it reached its
@@ -81,3 +84,27 @@ def test_error_estimate_bounds_the_error_across_the_box():
 @pytest.mark.parametrize("rtol", [3e-3, 1e-3])
 def test_error_estimate_bounds_the_error_at_tight_rtol(rtol):
     _check(_ratios(rtol, 3e-5))
+
+
+def test_melt_spread_estimate_bounds_its_error_on_the_presets():
+    # The experimental per-cell melting spread changes the discretisation (not the physics):
+    # its a posteriori estimate must bound its distance to the default solver's tight value.
+    # The reference's own estimate is added: the two searches' errors may add up.
+    for name in PRESETS:
+        scene = get_preset(name)
+        res = critical_height(scene, rtol=1e-3, melt_spread=MELT_SPREAD)
+        ref = critical_height(scene, rtol=1e-4)
+        assert res.error_estimate <= 1e-3 * (1.0 + 1e-12), name
+        assert (abs(res.critical_height / ref.critical_height - 1.0)
+                <= res.error_estimate + ref.error_estimate), (name, res, ref)
+
+
+@pytest.mark.slow
+def test_melt_spread_estimate_bounds_the_error_across_the_box():
+    _check(_ratios(3e-3, 3e-5, melt_spread=MELT_SPREAD))
+
+
+@pytest.mark.parametrize("bad", [-0.5, 2.0, "1"])
+def test_melt_spread_is_validated(bad):
+    with pytest.raises(SceneError, match="melt_spread"):
+        critical_height(get_preset("paper-quartz"), melt_spread=bad)

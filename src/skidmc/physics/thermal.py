@@ -51,6 +51,7 @@ __all__ = [
     "INFO_T_MAX",
     "INFO_Y_EXIT_MAX",
     "INFO_Y_MAX",
+    "MELT_SPREAD",
     "NEWTON_TOLERANCE_FRACTION",
     "RETRY_SAFETY",
     "STEP_SAFETY",
@@ -106,6 +107,20 @@ STEP_SAFETY = 0.8
 RETRY_SAFETY = 0.7
 
 
+#: Spread of each HE cell's melting step, as a multiple of the cell's temperature range, that
+#: the ``melt_spread`` option was measured with (:func:`_he_cell_enthalpy`; 0, the default
+#: everywhere, keeps one fixed width w). At level 1.5 at the critical height of the report
+#: presets (benchmarks/cost_breakdown.py): 0.5 leaves ~320 steps + ~30 rejected, 1.0 ~195 + 5
+#: (an inert run ~150), against 600-780 + 110-150 with a fixed 1 K step; 2.0 failed to
+#: converge on paper-gold.
+MELT_SPREAD = 1.0
+#: Beyond |z| = |T - T_m| / W > _SETTLED_Z a cell counts as fully melted or solid: the latent
+#: heat left out, e^(-2 _SETTLED_Z) L / c ~ 1e-8 K for HMX, is four decades below the finest
+#: level's step tolerance (1.2e-4 K at level 4). With W spread over the cells' temperature
+#: ranges (10-20 K near the front), a cutoff at 20 evaluated the exponential over +-400 K.
+_SETTLED_Z = 12.0
+
+
 @njit(cache=True, inline="always")
 def _flux(t, q0, s, c, w, t_exit, q_ext):
     """Frictional flux q(t) [W/m^2]: q0 (s - c (1 - cos w t)) on [0, t_exit), then q_ext."""
@@ -140,6 +155,60 @@ def _he_enthalpy(temperature, rho_c, latent_v, melting_point, melt_width):
     inv = 1.0 / (1.0 + e)
     return (rho_c * temperature + latent_v * e * inv,
             rho_c + 2.0 * latent_v * e * inv * inv * inv_width)
+
+
+@njit(cache=True, inline="always")
+def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_point, melt_width,
+                      melt_spread):
+    """Enthalpy [J/m^3] of HE cell ``i`` with its melting spread over the cell's own range.
+
+    A melting front crosses a cell in the time the temperature profile takes to sweep the
+    cell's temperature range dT_i (the cell width times the local gradient). With a step of
+    fixed width w << dT_i the cell instead sits on a plateau at T_m until its whole latent heat
+    is in, and then jumps on: every crossing kinks the histories of the cell and its
+    neighbours, and the step controller resolves each kink (6-10x an inert run's steps at
+    w = 1 K). With ``melt_spread`` = s > 0 the step's width is W_i = sqrt(w^2 + (s dT_i)^2), dT_i
+    from the centred difference of the two neighbours (across the interface for the first HE
+    cell: T is continuous there); the melt fraction then follows the front across the cell,
+    as the linear profile inside it would. W_i -> w as the mesh is refined (dT_i ~ cell
+    width), so the spreading is a discretisation error and converges with the levels, but not
+    as cleanly second order as the fixed step (docs/model.md, "Melting spread over a cell").
+    s = 0 is the fixed step of :func:`_he_enthalpy`, to the last bit.
+
+    Returns
+    -------
+    h, dh_dself, dh_dlow, dh_dup : float
+        Enthalpy [J/m^3] and its derivatives [J/(m^3 K)] with respect to the temperatures of
+        cell ``i`` and of its neighbours ``i - 1`` and ``i + 1`` (for Newton's Jacobian).
+    """
+    rc = rho_c[i]
+    t_i = temp[i]
+    if latent_v <= 0.0:
+        return rc * t_i, rc, 0.0, 0.0
+    if melt_spread <= 0.0 or i == n - 1:   # (the deepest cell has no neighbour beyond it)
+        h, dh = _he_enthalpy(t_i, rc, latent_v, melting_point, melt_width)
+        return h, dh, 0.0, 0.0
+    diff = temp[i + 1] - temp[i - 1]
+    deviation = t_i - melting_point
+    # Settled cells (melted or solid) skip the square root and exponential. W <= w + spread
+    # and spread <= s |diff| (a cell is narrower than its neighbours' centres
+    # are apart), so |deviation| > _SETTLED_Z (w + spread) puts |z| above it.
+    if abs(deviation) > _SETTLED_Z * (melt_width + melt_spread * abs(diff)):
+        return rc * t_i + (latent_v if deviation > 0.0 else 0.0), rc, 0.0, 0.0
+    ratio = width[i] / (0.5 * width[i - 1] + width[i] + 0.5 * width[i + 1])
+    spread = melt_spread * abs(diff) * ratio
+    step_width = math.sqrt(melt_width * melt_width + spread * spread)
+    z = deviation / step_width
+    if abs(z) > _SETTLED_Z:
+        return rc * t_i + (latent_v if z > 0.0 else 0.0), rc, 0.0, 0.0
+    e = math.exp(2.0 * z)
+    inv = 1.0 / (1.0 + e)
+    dphi_dz = 2.0 * e * inv * inv
+    # dh/dT_up = rho L phi'(z) dz/dW dW/dspread dspread/dT_up, and dh/dT_low = -dh/dT_up.
+    d_up = (latent_v * dphi_dz * (-z / step_width) * (melt_spread * spread / step_width)
+            * ratio * (1.0 if diff >= 0.0 else -1.0))
+    return (rc * t_i + latent_v * e * inv, rc + latent_v * dphi_dz / step_width,
+            -d_up, d_up)
 
 
 @njit(cache=True)
@@ -177,7 +246,7 @@ def adiabatic_induction_time(temperature, prefactor, activation_temperature, adi
 
 @njit(cache=True, nogil=True)
 def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
-                    he_density, latent_heat, melting_point, melt_width,
+                    he_density, latent_heat, melting_point, melt_width, melt_spread,
                     prefactor, activation_temperature, heat_of_reaction,
                     q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
                     initial_temperature, tol_temperature, dt_initial,
@@ -204,6 +273,10 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
         Heat of fusion L [J/kg]; 0 disables melting.
     melting_point, melt_width : float
         T_m [K] and the width w [K] over which the latent heat is released.
+    melt_spread : float
+        0 (the default everywhere): the fixed width w. s > 0: each HE cell's step widened to
+        sqrt(w^2 + (s dT_i)^2) with its temperature range dT_i (:func:`_he_cell_enthalpy`,
+        :data:`MELT_SPREAD`) [1].
     prefactor, activation_temperature, heat_of_reaction : float
         Z [1/s], T_a = E/R [K], Q [J/kg]; Z = 0 makes the HE inert.
     q0, slide_s, slide_c, omega, t_exit, q_ext : float
@@ -236,7 +309,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     n_he = n - n_target
     info = np.zeros(INFO_SIZE)
     simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
-                  he_density, latent_heat, melting_point, melt_width,
+                  he_density, latent_heat, melting_point, melt_width, melt_spread,
                   prefactor, activation_temperature, heat_of_reaction,
                   q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
                   initial_temperature, tol_temperature, dt_initial,
@@ -249,7 +322,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
 
 @njit(cache=True, nogil=True)
 def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
-                  he_density, latent_heat, melting_point, melt_width,
+                  he_density, latent_heat, melting_point, melt_width, melt_spread,
                   prefactor, activation_temperature, heat_of_reaction,
                   q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
                   initial_temperature, tol_temperature, dt_initial,
@@ -385,14 +458,18 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
             cp_prev = 0.0
             dp_prev = 0.0
             for i in range(n):
+                dh_dlow = 0.0
+                dh_dup = 0.0
                 if i >= n_target:
-                    h_new[i], dhdt[i] = _he_enthalpy(temp_new[i], rho_c[i], latent_v,
-                                                     melting_point, melt_width)
+                    h_new[i], dhdt[i], dh_dlow, dh_dup = _he_cell_enthalpy(
+                        i, n, n_target, temp_new, width, rho_c, latent_v, melting_point,
+                        melt_width, melt_spread)
                 else:
                     h_new[i] = rho_c[i] * temp_new[i]
                     dhdt[i] = rho_c[i]
                 r = width[i] * (h_new[i] - hist_h[i]) + flow_in
                 d = width[i] * dhdt[i] + g_low
+                lower = width[i] * dh_dlow - g_low
                 if i < n - 1:
                     g_up = bdt * face_conductance[i]
                     flow_out = g_up * (temp_new[i + 1] - temp_new[i])  # into i from i+1
@@ -414,10 +491,11 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                     dsource = source * activation_temperature * inv_t * inv_t * inv_denom
                     r -= bdt * width[i] * source
                     d -= bdt * width[i] * dsource
-                # Forward sweep: lower = -g_low, upper = -g_up.
-                inv = 1.0 / (d + g_low * cp_prev)
-                cp_prev = -g_up * inv
-                dp_prev = (-r + g_low * dp_prev) * inv
+                # Forward sweep (the melting cells' enthalpies make the off-diagonals unequal).
+                upper = width[i] * dh_dup - g_up
+                inv = 1.0 / (d - lower * cp_prev)
+                cp_prev = upper * inv
+                dp_prev = (-r - lower * dp_prev) * inv
                 cp[i] = cp_prev
                 dp[i] = dp_prev
                 flow_in = flow_out
@@ -455,8 +533,9 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
             c2 = dt * (dt + dt_prev) / (dt_prev + dt_prev2)
             for i in range(n):
                 if i >= n_target:
-                    h_new[i], dhdt[i] = _he_enthalpy(temp_new[i], rho_c[i], latent_v,
-                                                     melting_point, melt_width)
+                    h_new[i], dhdt[i], _, _ = _he_cell_enthalpy(
+                        i, n, n_target, temp_new, width, rho_c, latent_v, melting_point,
+                        melt_width, melt_spread)
                     j = i - n_target
                     if reactive and temp_new[i] >= t_cold:
                         k = prefactor * math.exp(-activation_temperature / temp_new[i])

@@ -148,7 +148,7 @@ def _margin(x, row, sc, n_cells, share, tol_temperature, melt_width, work, info)
     (no event); NaN when the integration fails (the search then goes to the CPU)."""
     q0 = sc[_S_FLUX] * math.sqrt(math.exp(x))
     simulate_core(work[_ROW_WIDTH], work[_ROW_RHO_C], work[_ROW_FACE], 2 * n_cells, n_cells,
-                  share, row[_HE_RHO], sc[_S_LATENT], row[_HE_TM], melt_width, row[_Z],
+                  share, row[_HE_RHO], sc[_S_LATENT], row[_HE_TM], melt_width, 0.0, row[_Z],
                   row[_TA], row[_Q], q0, sc[_S_SLIDE_S], sc[_S_SLIDE_C], sc[_S_OMEGA],
                   sc[_S_T_EXIT], q0 * sc[_S_EXTENSION], sc[_S_T_END], row[_T0],
                   tol_temperature, 1e-6 * sc[_S_T_EXIT], sc[_S_RUNAWAY], MAX_STEPS, work[0],

@@ -140,12 +140,17 @@ class Resolution:
         Local error tolerance of the BDF2 step controller [K].
     melt_width : float
         Width w [K] of the smoothed melting step (see skidmc.physics.thermal._he_enthalpy).
+    melt_spread : float
+        0 (default): the step has the width w in every HE cell. s > 0 widens each cell's step
+        to sqrt(w^2 + (s dT)^2), dT its temperature range (experimental; see
+        skidmc.physics.thermal._he_cell_enthalpy and docs/model.md) [1].
     """
 
     cells_per_medium: int
     first_cell_fraction: float
     tol_temperature: float
     melt_width: float
+    melt_spread: float = 0.0
 
 
 #: Melting-step width at level 0 [K]; the width at level L is at least
@@ -180,10 +185,11 @@ def melt_width_floor(level):
 
 
 @functools.lru_cache(maxsize=256, typed=True)
-def resolution_for_level(level, melt_width=None):
+def resolution_for_level(level, melt_width=None, melt_spread=0.0):
     """Resolution of refinement level ``level`` (float allowed) [see :data:`BASE_RESOLUTION`].
 
     ``melt_width`` [K] is carried unchanged; default :func:`melt_width_floor` of ``level``.
+    ``melt_spread`` [1]: see :class:`Resolution`.
     Cached (by value and type, so a result never depends on an earlier call): a
     :class:`Resolution` is immutable, and every model (the fast tier's mesh-less one
     included, built per result) asks for one of a few levels.
@@ -192,7 +198,8 @@ def resolution_for_level(level, melt_width=None):
         melt_width = melt_width_floor(level)
     cells, first_cell_fraction, tol_temperature = level_resolution(float(level))
     return Resolution(cells_per_medium=int(cells), first_cell_fraction=float(first_cell_fraction),
-                      tol_temperature=float(tol_temperature), melt_width=float(melt_width))
+                      tol_temperature=float(tol_temperature), melt_width=float(melt_width),
+                      melt_spread=float(melt_spread))
 
 
 @njit(cache=True)
@@ -300,7 +307,7 @@ class SkidModel:
 
 def build_model(scene, resolution=None, *, level=0.0, melting=True,
                 runaway_fraction=DEFAULT_RUNAWAY_FRACTION, horizon=HORIZON_EXIT_TIMES,
-                meshes=True, melt_width=None):
+                meshes=True, melt_width=None, melt_spread=0.0):
     """Infer the model a scene needs and build its meshes.
 
     Parameters
@@ -314,6 +321,9 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     melt_width : float, optional
         Width of the smoothed melting step [K], used when ``resolution`` is not given;
         default :func:`melt_width_floor` of ``level``.
+    melt_spread : float
+        Spread of each HE cell's melting step [1] (:class:`Resolution`), used when
+        ``resolution`` is not given.
     melting : bool
         Model melting of the HE (enthalpy plateau at T_m) when the scene has a
         heat of fusion.
@@ -330,7 +340,7 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     SkidModel
     """
     if resolution is None:
-        resolution = resolution_for_level(level, melt_width)
+        resolution = resolution_for_level(level, melt_width, melt_spread)
     sigma = scene.flow_stress
     mass = scene.billet_mass
     diameter = scene.billet_diameter

@@ -89,7 +89,8 @@ COARSE_GAP = 2.0
 
 def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
                     *, method="brent", level=None, extrapolate=None, melting=True,
-                    runaway_fraction=None, h_guess=None, model=None, melt_width=None):
+                    runaway_fraction=None, h_guess=None, model=None, melt_width=None,
+                    melt_spread=0.0):
     """Critical drop height of a scene [m].
 
     Parameters
@@ -126,6 +127,12 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         extrapolation or coarse start).
     melt_width : float, optional
         Width of the smoothed melting step [K]; default :func:`melt_width_for_rtol`.
+    melt_spread : float
+        Experimental (default 0, the calibrated solver): spread each HE cell's melting step
+        over its own temperature range, ``melt_spread`` times it
+        (:data:`skidmc.physics.thermal.MELT_SPREAD` = 1 measured) [1]. 2-3x cheaper
+        simulations; the error model was calibrated without it (docs/model.md, "Melting spread
+        over a cell"), so only the a posteriori estimate of the default search covers it.
 
     Returns
     -------
@@ -147,6 +154,10 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     if melt_width is not None and not (isinstance(melt_width, (int, float))
                                        and melt_width > 0.0):
         raise SceneError("melt_width", melt_width, "must be a number > 0 [K]")
+    if not (isinstance(melt_spread, (int, float)) and 0.0 <= melt_spread <= 1.5):
+        # Beyond ~1.5 the first HE cell's Newton iterations stopped converging (2.0 failed on
+        # paper-gold).
+        raise SceneError("melt_spread", melt_spread, "must be a number in [0, 1.5]")
     # The default: Richardson pairs refined until their own (a posteriori) error estimate meets
     # rtol, the calibrated model choosing only the first pair. A forced level, a given model or
     # extrapolate=False keep one plan, with the calibrated model's estimate.
@@ -161,7 +172,8 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         # The same width at every level of the search (coarse start, Richardson pairs).
         melt_width = melt_width_for_rtol(rtol, level)
     common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
-                  runaway_fraction=runaway_fraction, melt_width=float(melt_width))
+                  runaway_fraction=runaway_fraction, melt_width=float(melt_width),
+                  melt_spread=float(melt_spread))
     if adaptive:
         # The root finder gets the room the pair is likely not to use; the a posteriori
         # estimate, not the calibrated model, then decides whether it fits (_adaptive_pair).
@@ -354,7 +366,8 @@ def _melt_width_bias(scene, coarse, common):
     kwargs = ({} if common["runaway_fraction"] is None
               else {"runaway_fraction": common["runaway_fraction"]})
     model = build_model(scene, level=coarse.level, melting=common["melting"],
-                        melt_width=2.0 * common["melt_width"], **kwargs)
+                        melt_width=2.0 * common["melt_width"],
+                        melt_spread=common["melt_spread"], **kwargs)
     m_wide = simulate(model, height).margin
     if not math.isfinite(m_wide):
         return None, 1
@@ -388,8 +401,8 @@ def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None):
     return res
 
 def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
-            melt_width, model=None, h_guess=None, overshoot=None, slope=None, go_slope=None,
-            known=(), guess_sigma=None):
+            melt_width, melt_spread=0.0, model=None, h_guess=None, overshoot=None, slope=None,
+            go_slope=None, known=(), guess_sigma=None):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
@@ -406,7 +419,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     if own_model:
         kwargs = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
         model = build_model(scene, level=level, melting=melting, melt_width=melt_width,
-                            **kwargs)
+                            melt_spread=melt_spread, **kwargs)
     base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
                 exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
                 error_estimate=(modelled_error(level) + x_tol

@@ -76,6 +76,7 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
     info = simulate_kernel(
         model.width, model.rho_c, model.face_conductance, model.n_target, model.q_share_he,
         model.he_density, model.latent_heat, model.melting_point, model.resolution.melt_width,
+        model.resolution.melt_spread,
         model.prefactor, model.activation_temperature, model.heat_of_reaction,
         flux[0], flux[1], flux[2], flux[3], flux[4], flux[5], model.end_time,
         model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
