@@ -16,6 +16,9 @@ The melting step's width w is, by default, the solver's floor at each level
 (``skidmc.solver.model.melt_width_floor``: 2 K * 2**-L, the rule the error model was calibrated
 with). ``--melt-width W`` holds it at W kelvin at every level instead, as the solver does
 when rtol sets a wider step (``melt_width_for_rtol``); the files then get a ``_wW`` suffix.
+``--melt-spread S`` runs every level with the experimental per-cell melting spread S
+(``critical_height(..., melt_spread=S)``); the files get an ``_sS`` suffix. Its data are what a
+recalibration of the error model for that option would start from (docs/model.md).
 """
 
 from __future__ import annotations
@@ -58,11 +61,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--melt-width", type=float, default=None,
                         help="melting-step width [K] at every level (default: the level floor)")
+    parser.add_argument("--melt-spread", type=float, default=0.0,
+                        help="experimental per-cell melting spread [1] (default 0: off)")
     parser.add_argument("--max-level", type=float, default=LEVELS[-1])
     args = parser.parse_args()
     levels = [lv for lv in LEVELS if lv <= args.max_level]
     suffix = "" if args.melt_width is None else f"_w{args.melt_width:g}"
     option = f" --melt-width {args.melt_width:g}" if suffix else ""
+    if args.melt_spread:
+        suffix += f"_s{args.melt_spread:g}"
+        option += f" --melt-spread {args.melt_spread:g}"
     width_text = ("the solver's floor 2 K * 2^-L" if args.melt_width is None
                   else f"{args.melt_width:g} K at every level")
     OUT.mkdir(parents=True, exist_ok=True)
@@ -73,7 +81,8 @@ def main():
         heights, costs = [], []
         for level in levels:
             width = melt_width_floor(level) if args.melt_width is None else args.melt_width
-            res = critical_height(scene, level=level, rtol=1e-7, melt_width=width)
+            res = critical_height(scene, level=level, rtol=1e-7, melt_width=width,
+                                  melt_spread=args.melt_spread)
             heights.append(res.critical_height)
             costs.append(res.wall_time / max(res.evaluations, 1))
             print(f"{case:28s} level {level:3.1f} H = {res.critical_height:.8g} m "
