@@ -201,14 +201,12 @@ def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_poin
     z = deviation / step_width
     if abs(z) > _SETTLED_Z:
         return rc * t_i + (latent_v if z > 0.0 else 0.0), rc, 0.0, 0.0
-    e = math.exp(2.0 * z)
-    inv = 1.0 / (1.0 + e)
-    dphi_dz = 2.0 * e * inv * inv
-    # dh/dT_up = rho L phi'(z) dz/dW dW/dspread dspread/dT_up, and dh/dT_low = -dh/dT_up.
-    d_up = (latent_v * dphi_dz * (-z / step_width) * (melt_spread * spread / step_width)
-            * ratio * (1.0 if diff >= 0.0 else -1.0))
-    return (rc * t_i + latent_v * e * inv, rc + latent_v * dphi_dz / step_width,
-            -d_up, d_up)
+    h, dh = _he_enthalpy(t_i, rc, latent_v, melting_point, step_width)
+    # dh/dT_up = rho L phi'(z) dz/dW dW/dspread dspread/dT_up with rho L phi'(z) = (dh - rho c) W
+    # and dz/dW = -z / W; dh/dT_low = -dh/dT_up.
+    d_up = (-(dh - rc) * z * (melt_spread * spread / step_width) * ratio
+            * (1.0 if diff >= 0.0 else -1.0))
+    return h, dh, -d_up, d_up
 
 
 @njit(cache=True)
