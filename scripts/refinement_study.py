@@ -41,6 +41,11 @@ from skidmc.solver.plan import (  # noqa: E402
     ERROR_LEVEL0,
     RICHARDSON_ERROR_LEVEL0,
     RICHARDSON_MIN_LEVEL,
+    RICHARDSON_RESIDUAL_RATIO,
+    RICHARDSON_RESIDUAL_RATIO_LEVEL0,
+    RICHARDSON_RESIDUAL_RATIO_SPREAD,
+    SPREAD_FINE_LEVEL,
+    a_posteriori_error,
     level_for_rtol,
     plan_for_rtol,
 )
@@ -62,7 +67,8 @@ def main():
     parser.add_argument("--melt-width", type=float, default=None,
                         help="melting-step width [K] at every level (default: the level floor)")
     parser.add_argument("--melt-spread", type=float, default=0.0,
-                        help="experimental per-cell melting spread [1] (default 0: off)")
+                        help="per-cell melting spread [1] at every level (default 0: the fixed "
+                             "step; the default search uses thermal.MELT_SPREAD)")
     parser.add_argument("--max-level", type=float, default=LEVELS[-1])
     args = parser.parse_args()
     levels = [lv for lv in LEVELS if lv <= args.max_level]
@@ -155,6 +161,37 @@ def main():
         "",
         f"(The values at L >= {levels[-2]:g} use the L{levels[-1]:g} data that define the "
         "converged value, so they are not independent.)",
+        "",
+        "## The a posteriori ratio: residual of R over the pair's own correction",
+        "",
+        "|R / H_conv - 1| / |c| with c = (H_L - H_{L-1}) / (3 R), the multiple of its own "
+        "correction that the default search's estimate assumes (`a_posteriori_error`: "
+        f"{RICHARDSON_RESIDUAL_RATIO:g}, or {RICHARDSON_RESIDUAL_RATIO_LEVEL0:g} for the pair "
+        f"(0, 1); {RICHARDSON_RESIDUAL_RATIO_SPREAD:g} with the melting spread from the pair "
+        f"({SPREAD_FINE_LEVEL:g}, {SPREAD_FINE_LEVEL + 1:g}) up).",
+        "",
+        "| case | " + " | ".join(f"({lv - 1:g}, {lv:g})" for lv in levels if lv >= 1.0) + " |",
+        "|---|" + "---|" * sum(lv >= 1.0 for lv in levels),
+    ]
+    ratio_worst = {}
+    for case, (h, conv, _) in table.items():
+        cells = []
+        for i, lv in enumerate(levels):
+            if lv < 1.0:
+                continue
+            j = levels.index(lv - 1.0)
+            r = h[i] + (h[i] - h[j]) / 3.0
+            c = abs((h[i] - h[j]) / (3.0 * r))
+            ratio = abs(r / conv - 1) / c if c > 0.0 else math.inf
+            ratio_worst[lv] = max(ratio_worst.get(lv, 0.0), ratio)
+            cells.append(f"{ratio:.2f}")
+        lines.append(f"| {case} | " + " | ".join(cells) + " |")
+    lines += [
+        "| worst case | " + " | ".join(f"{ratio_worst[lv]:.2f}" for lv in sorted(ratio_worst))
+        + " |",
+        "| assumed by the default search | "
+        + " | ".join(f"{a_posteriori_error(1.0, lv - 1.0, args.melt_spread):g}"
+                     for lv in sorted(ratio_worst)) + " |",
         "",
         "The solver chooses the cheapest plan whose error model is below 0.6 rtol "
         "(DISCRETISATION_SHARE): "

@@ -13,6 +13,7 @@ import math
 import pytest
 from test_extremes import _rate_at_ref
 
+from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.scene import get_preset, make_scene
 from skidmc.solver import critical_height
 from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K
@@ -32,18 +33,19 @@ from skidmc.solver.search import _search, _tighten
 @pytest.mark.parametrize("rtol", [3e-2, 1e-2, 5e-3, 3e-3, 1e-3, 1e-4])
 def test_pair_root_tolerance_is_the_room_left_or_the_root_share(rtol):
     level = first_pair_level(rtol)
-    x_tol = pair_root_tolerance(rtol, level, melt_width_for_rtol(rtol, level))
+    x_tol = pair_root_tolerance(rtol, level, melt_width_for_rtol(rtol, level), MELT_SPREAD)
     assert x_tol >= ROOT_SHARE * rtol * (1 - 1e-12)
     assert x_tol <= max(MAX_ROOT_TOLERANCE, ROOT_SHARE * rtol)
     assert x_tol < rtol
 
 
+@pytest.mark.parametrize("spread", [0.0, MELT_SPREAD])
 @pytest.mark.parametrize("rtol", [3e-2, 1e-2, 3e-3, 1e-3, 1e-4])
-def test_jump_root_tolerances_spend_the_room_where_halvings_are_fewest(rtol):
+def test_jump_root_tolerances_spend_the_room_where_halvings_are_fewest(rtol, spread):
     level = first_pair_level(rtol)
     width = melt_width_for_rtol(rtol, level)
-    coarse, fine = jump_root_tolerances(rtol, level, width)
-    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0)
+    coarse, fine = jump_root_tolerances(rtol, level, width, spread)
+    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0, spread)
                  + MELT_WIDTH_BIAS_PER_K * width)
     room = max(ROOT_SHARE * rtol, rtol - predicted)
     # The Richardson value's root error (4 fine + coarse) / 3 fills the room the pair is likely
@@ -70,7 +72,7 @@ def test_stops_sliding_takes_at_most_twice_the_simulations_of_rebound(rtol):
 
 def test_the_studies_rtol_gets_a_looser_root():
     # rtol 1e-2 (the shipped studies): the pair (0, 1) is likely to use ~2.5e-3 of it.
-    assert pair_root_tolerance(1e-2, 1.0, 4.0) == pytest.approx(MAX_ROOT_TOLERANCE)
+    assert pair_root_tolerance(1e-2, 1.0, 4.0, MELT_SPREAD) == pytest.approx(MAX_ROOT_TOLERANCE)
 
 
 def test_a_tightened_root_reuses_its_simulations():

@@ -108,11 +108,12 @@ RETRY_SAFETY = 0.7
 
 
 #: Spread of each HE cell's melting step, as a multiple of the cell's temperature range, that
-#: the ``melt_spread`` option was measured with (:func:`_he_cell_enthalpy`; 0, the default
-#: everywhere, keeps one fixed width w). At level 1.5 at the critical height of the report
-#: presets (benchmarks/cost_breakdown.py): 0.5 leaves ~320 steps + ~30 rejected, 1.0 ~195 + 5
-#: (an inert run ~150), against 600-780 + 110-150 with a fixed 1 K step; 2.0 failed to
-#: converge on paper-gold.
+#: the default search uses (:func:`_he_cell_enthalpy`; ``melt_spread=0`` keeps one fixed width
+#: w, as forced plans do). At level 1.5 at the critical height of the report presets
+#: (benchmarks/cost_breakdown.py): 0.5 leaves ~320 steps + ~30 rejected, 1.0 ~195 + 5 (an
+#: inert run ~150), against 600-780 + 110-150 with a fixed 1 K step; 2.0 failed to converge on
+#: paper-gold. Its error and how the search's estimate covers it: docs/model.md, "Melting
+#: spread over a cell".
 MELT_SPREAD = 1.0
 #: Beyond |z| = |T - T_m| / W > _SETTLED_Z a cell counts as fully melted or solid: the latent
 #: heat left out, e^(-2 _SETTLED_Z) L / c ~ 1e-8 K for HMX, is four decades below the finest

@@ -95,8 +95,8 @@ _FAST_SHAPE = (3, N_TIMES)
 _KERNEL = None
 
 
-def _thread(rows, rtol, h_min, h_max, level, melt_width, x_tol, melting, runaway_fraction,
-            table, gl_x, gl_w, out):
+def _thread(rows, rtol, h_min, h_max, level, melt_width, melt_spread, x_tol, melting,
+            runaway_fraction, table, gl_x, gl_w, out):
     """One thread: the device search of scene ``rows[i]`` into ``out[i]`` (compiled by
     :func:`_kernel`)."""
     i = cuda.grid(1)
@@ -107,8 +107,8 @@ def _thread(rows, rtol, h_min, h_max, level, melt_width, x_tol, melting, runaway
         info = cuda.local.array(INFO_SIZE, np.float64)
         coarse = cuda.local.array(8, np.float64)
         fine = cuda.local.array(8, np.float64)
-        _core(rows[i], rtol, h_min, h_max, level, melt_width, x_tol, melting, runaway_fraction,
-              table, gl_x, gl_w, work, fast_work, info, coarse, fine, out[i])
+        _core(rows[i], rtol, h_min, h_max, level, melt_width, melt_spread, x_tol, melting,
+              runaway_fraction, table, gl_x, gl_w, work, fast_work, info, coarse, fine, out[i])
 
 
 # What a thread calls: the compiled search itself on a GPU (numba compiles the njit function
@@ -140,12 +140,14 @@ def _kernel():
 
 
 def _plan(rtol):
-    """(level, melting width [K], root tolerance [1]) of the first Richardson pair for rtol."""
+    """(level, melting width [K], melting spread [1], root tolerance [1]) of the first
+    Richardson pair for rtol: the CPU default search's."""
+    from skidmc.physics.thermal import MELT_SPREAD
     from skidmc.solver.plan import first_pair_level, melt_width_for_rtol, pair_root_tolerance
 
     level = first_pair_level(rtol)
     width = melt_width_for_rtol(rtol, level)
-    return level, width, pair_root_tolerance(rtol, level, width)
+    return level, width, MELT_SPREAD, pair_root_tolerance(rtol, level, width, MELT_SPREAD)
 
 
 def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", melting=True,
@@ -192,9 +194,9 @@ def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", 
     if rows.ndim != 2 or rows.shape[1] != 18:
         raise ValueError(f"rows must have shape (n, 18), got {rows.shape}")
     runaway = DEFAULT_RUNAWAY_FRACTION if runaway_fraction is None else float(runaway_fraction)
-    level, width, x_tol = _plan(float(rtol))
-    args = (float(rtol), float(h_min), float(h_max), float(level), float(width), float(x_tol),
-            bool(melting), runaway)
+    level, width, spread, x_tol = _plan(float(rtol))
+    args = (float(rtol), float(h_min), float(h_max), float(level), float(width), float(spread),
+            float(x_tol), bool(melting), runaway)
     n = rows.shape[0]
     out = np.zeros((n, OUT_SIZE))
     start = time.perf_counter()

@@ -127,8 +127,8 @@ OUT_SIZE = 10
 
 # Scalars shared by every level of one scene (the `sc` array).
 (_S_OMEGA, _S_T_EXIT, _S_SLIDE_S, _S_SLIDE_C, _S_EXTENSION, _S_T_END, _S_FLUX,
- _S_LATENT, _S_RUNAWAY) = range(9)
-_N_SCALARS = 9
+ _S_LATENT, _S_RUNAWAY, _S_SPREAD) = range(10)
+_N_SCALARS = 10
 
 
 @njit(cache=True)
@@ -148,7 +148,8 @@ def _margin(x, row, sc, n_cells, share, tol_temperature, melt_width, work, info)
     (no event); NaN when the integration fails (the search then goes to the CPU)."""
     q0 = sc[_S_FLUX] * math.sqrt(math.exp(x))
     simulate_core(work[_ROW_WIDTH], work[_ROW_RHO_C], work[_ROW_FACE], 2 * n_cells, n_cells,
-                  share, row[_HE_RHO], sc[_S_LATENT], row[_HE_TM], melt_width, 0.0, row[_Z],
+                  share, row[_HE_RHO], sc[_S_LATENT], row[_HE_TM], melt_width, sc[_S_SPREAD],
+                  row[_Z],
                   row[_TA], row[_Q], q0, sc[_S_SLIDE_S], sc[_S_SLIDE_C], sc[_S_OMEGA],
                   sc[_S_T_EXIT], q0 * sc[_S_EXTENSION], sc[_S_T_END], row[_T0],
                   tol_temperature, 1e-6 * sc[_S_T_EXIT], sc[_S_RUNAWAY], MAX_STEPS, work[0],
@@ -324,9 +325,9 @@ def _root_error(coarse_tol, fine_tol):
 
 
 @njit(cache=True)
-def critical_height_core(row, rtol, h_min, h_max, level, melt_width, x_tol, melting,
-                         runaway_fraction, table, gl_x, gl_w, work, fast_work, info, coarse,
-                         fine, out):
+def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread, x_tol,
+                         melting, runaway_fraction, table, gl_x, gl_w, work, fast_work, info,
+                         coarse, fine, out):
     """The default full-tier search of one scene (module docstring); results in ``out``.
 
     Parameters
@@ -341,6 +342,9 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, x_tol, melt
         The first pair's fine level, melting width [K] and root tolerance on ln H [1]
         (:func:`skidmc.solver.plan.first_pair_level`, ``melt_width_for_rtol``,
         ``pair_root_tolerance``).
+    melt_spread : float
+        Melting spread over each HE cell [1] (:data:`skidmc.physics.thermal.MELT_SPREAD`, the
+        CPU search's default).
     melting : bool
         Model melting of the HE.
     runaway_fraction : float
@@ -399,7 +403,7 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, x_tol, melt
     sc[_S_OMEGA], sc[_S_T_EXIT], sc[_S_SLIDE_S], sc[_S_SLIDE_C] = omega, t_exit, slide_s, slide_c
     sc[_S_EXTENSION], sc[_S_T_END] = extension, HORIZON_EXIT_TIMES * t_exit
     sc[_S_FLUX] = mu * row[_SIGMA] * math.sqrt(2.0 * STANDARD_GRAVITY)
-    sc[_S_LATENT], sc[_S_RUNAWAY] = latent, runaway_fraction
+    sc[_S_LATENT], sc[_S_RUNAWAY], sc[_S_SPREAD] = latent, runaway_fraction, melt_spread
 
     coarse_level, fine_level = level - 1.0, level
     coarse_tol, fine_tol = x_tol, 0.5 * x_tol
@@ -436,7 +440,7 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, x_tol, melt
         correction = (h_f - h_c) / 3.0
         height = h_f + correction
         relative = correction / height
-        pair = a_posteriori_error(relative, coarse_level)
+        pair = a_posteriori_error(relative, coarse_level, melt_spread)
         estimate = pair + melt_bias + _root_error(coarse_tol, fine_tol)
         if estimate <= rtol * (1.0 + 1e-12) or round_ == MAX_ADAPTIVE_ROUNDS:
             break
@@ -465,7 +469,8 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, x_tol, melt
                 out[OUT_STATUS], out[OUT_EVALUATIONS] = STATUS_CPU, evaluations
                 return
             # Refine: the next level's root predicted from this pair; the pair moves up.
-            room = rtol - melt_bias - a_posteriori_error(0.5 * relative, fine_level)
+            room = rtol - melt_bias - a_posteriori_error(0.5 * relative, fine_level,
+                                                         melt_spread)
             tight = min(MAX_ROOT_TOLERANCE, max(0.5 * ROOT_SHARE * rtol,
                                                 (3.0 * room - fine_tol) / 4.0))
             guess = math.log(height * (1.0 - 0.25 * relative))
@@ -491,8 +496,8 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, x_tol, melt
 
 
 @njit(cache=True, parallel=True)
-def critical_heights_cpu(rows, rtol, h_min, h_max, level, melt_width, x_tol, melting,
-                         runaway_fraction, table, gl_x, gl_w, out):
+def critical_heights_cpu(rows, rtol, h_min, h_max, level, melt_width, melt_spread, x_tol,
+                         melting, runaway_fraction, table, gl_x, gl_w, out):
     """:func:`critical_height_core` for every row of ``rows`` (shape (n, 18)) on the CPU's
     threads, each with its own NumPy scratch; results in ``out`` (shape (n, OUT_SIZE))."""
     for i in prange(rows.shape[0]):
@@ -501,6 +506,6 @@ def critical_heights_cpu(rows, rtol, h_min, h_max, level, melt_width, x_tol, mel
         info = np.empty(INFO_SIZE)
         coarse = np.empty(8)
         fine = np.empty(8)
-        critical_height_core(rows[i], rtol, h_min, h_max, level, melt_width, x_tol, melting,
-                             runaway_fraction, table, gl_x, gl_w, work, fast_work, info, coarse,
-                             fine, out[i])
+        critical_height_core(rows[i], rtol, h_min, h_max, level, melt_width, melt_spread, x_tol,
+                             melting, runaway_fraction, table, gl_x, gl_w, work, fast_work,
+                             info, coarse, fine, out[i])

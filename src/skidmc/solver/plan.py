@@ -27,7 +27,9 @@ __all__ = [
     "RICHARDSON_MIN_LEVEL",
     "RICHARDSON_RESIDUAL_RATIO",
     "RICHARDSON_RESIDUAL_RATIO_LEVEL0",
+    "RICHARDSON_RESIDUAL_RATIO_SPREAD",
     "ROOT_SHARE",
+    "SPREAD_FINE_LEVEL",
     "a_posteriori_error",
     "extrapolated_error",
     "first_pair_level",
@@ -87,6 +89,21 @@ RICHARDSON_RESIDUAL_RATIO = 0.5
 #: width's bias bound and the root tolerance, added to it in the reported estimate, cover the
 #: other two (tests/test_error_estimate.py checks the total).
 RICHARDSON_RESIDUAL_RATIO_LEVEL0 = 0.75
+#: With the melting spread over each HE cell (:data:`skidmc.physics.thermal.MELT_SPREAD`, the
+#: default search's), the levels' errors fall faster than 4x per level from about level 1.5
+#: on, while the spread fades out of the cells (observed order 2.1-2.6 from L = 1 to 3), and a
+#: second-order extrapolation overshoots: by |4 - 2^p| / (2^p - 1) of its correction for a
+#: pure order p per level (0.57 at p = 3), by at most the whole correction for any p >= 1.32
+#: with errors of one sign. The refinement study at the fixed widths the search uses
+#: (``scripts/refinement_study.py --melt-width W --melt-spread 1``, W = 0.35, 1, 2, 3, 4 K;
+#: results/validation/refinement_wW_s1.md, "a posteriori ratio") measures the residual at most
+#: 0.40 |c| for the pairs (0.5, 1.5) and (1, 2) and 0.56 |c| for (0, 1) (within the ratios
+#: above), but up to 0.62 |c| for (1.5, 2.5) and 0.74 |c| for the finer pairs at W = 0.35 K,
+#: rising as W narrows. So a spread pair whose coarse level is at least SPREAD_FINE_LEVEL is
+#: estimated at RICHARDSON_RESIDUAL_RATIO_SPREAD = 1, the bound that does not depend on the
+#: order.
+SPREAD_FINE_LEVEL = 1.5
+RICHARDSON_RESIDUAL_RATIO_SPREAD = 1.0
 #: Fraction of the calibrated worst-case correction (:func:`predicted_correction`) expected of
 #: a pair when its root tolerance is first chosen (:func:`pair_root_tolerance`). On the 23
 #: scenes of benchmarks/solver.py the pair (0, 1) measured |c| = 0.6-2.3e-3 (median ~0.5 of
@@ -186,7 +203,7 @@ def first_pair_level(rtol):
 
 
 @njit(cache=True)
-def a_posteriori_error(correction, coarse_level):
+def a_posteriori_error(correction, coarse_level, melt_spread):
     """Estimated discretisation error of a Richardson value [1], from its own pair.
 
     Parameters
@@ -195,16 +212,22 @@ def a_posteriori_error(correction, coarse_level):
         (H_L - H_{L-1}) / (3 R) of the pair, R the extrapolated height [1].
     coarse_level : float
         L - 1.
+    melt_spread : float
+        The pair's melting spread over each HE cell [1] (0: the fixed step).
 
     Returns
     -------
     float
-        :data:`RICHARDSON_RESIDUAL_RATIO` |correction| (or
-        :data:`RICHARDSON_RESIDUAL_RATIO_LEVEL0` |correction| when ``coarse_level`` is 0).
+        :data:`RICHARDSON_RESIDUAL_RATIO` |correction|;
+        :data:`RICHARDSON_RESIDUAL_RATIO_LEVEL0` |correction| when ``coarse_level`` is 0;
+        :data:`RICHARDSON_RESIDUAL_RATIO_SPREAD` |correction| when a spread pair's coarse level
+        is at least :data:`SPREAD_FINE_LEVEL`.
     """
-    ratio = (RICHARDSON_RESIDUAL_RATIO_LEVEL0 if coarse_level < 0.5
-             else RICHARDSON_RESIDUAL_RATIO)
-    return ratio * abs(correction)
+    if melt_spread > 0.0 and coarse_level >= SPREAD_FINE_LEVEL:
+        return RICHARDSON_RESIDUAL_RATIO_SPREAD * abs(correction)
+    if coarse_level < 0.5:
+        return RICHARDSON_RESIDUAL_RATIO_LEVEL0 * abs(correction)
+    return RICHARDSON_RESIDUAL_RATIO * abs(correction)
 
 
 def melt_bias_bound(terms, melt_width):
@@ -240,7 +263,7 @@ def predicted_correction(level):
 
 
 @njit(cache=True)
-def pair_root_tolerance(rtol, level, melt_width):
+def pair_root_tolerance(rtol, level, melt_width, melt_spread):
     """First tolerance of the root finder on ln H [1] for a default search's pair at ``level``.
 
     What ``rtol`` leaves after the pair's a posteriori estimate predicted from the calibrated
@@ -256,7 +279,7 @@ def pair_root_tolerance(rtol, level, melt_width):
     :func:`melt_width_for_rtol`: rtol 1e-2 -> 5e-3 (pair (0, 1), w = 4 K), 3e-3 -> 6e-4 and
     1e-3 -> 2e-4 (the first pass of issue 16 fixed 0.2 rtol everywhere).
     """
-    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0)
+    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0, melt_spread)
                  + MELT_WIDTH_BIAS_PER_K * melt_width)
     room = rtol - predicted
     if room < 2.0 * ROOT_SHARE * rtol:
@@ -264,7 +287,7 @@ def pair_root_tolerance(rtol, level, melt_width):
     return max(ROOT_SHARE * rtol, min(MAX_ROOT_TOLERANCE, room))
 
 
-def jump_root_tolerances(rtol, level, melt_width):
+def jump_root_tolerances(rtol, level, melt_width, melt_spread):
     """First root tolerances on ln H [1] ``(coarse, fine)`` of a pair whose margin jumps.
 
     Where sliding stops before rebound, each halving of a root's bracket costs one simulation
@@ -276,7 +299,7 @@ def jump_root_tolerances(rtol, level, melt_width):
     given sum, for d_c = 4 d_f. Each at most :data:`MAX_ROOT_TOLERANCE`. rtol 1e-3 (pair
     (0.5, 1.5), w = 1 K) -> (5.7e-4, 1.4e-4) instead of (2e-4, 1e-4).
     """
-    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0)
+    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0, melt_spread)
                  + MELT_WIDTH_BIAS_PER_K * melt_width)
     room = max(ROOT_SHARE * rtol, rtol - predicted)
     coarse = min(MAX_ROOT_TOLERANCE, 1.5 * room)

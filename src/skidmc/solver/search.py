@@ -22,6 +22,7 @@ import time
 
 from skidmc.errors import SceneError
 from skidmc.physics.mechanics import EXIT_STOPS_SLIDING, impact_constants
+from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.solver.model import build_model, melt_width_floor
 from skidmc.solver.plan import (
     MAX_ADAPTIVE_LEVEL,
@@ -90,7 +91,7 @@ COARSE_GAP = 2.0
 def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
                     *, method="brent", level=None, extrapolate=None, melting=True,
                     runaway_fraction=None, h_guess=None, model=None, melt_width=None,
-                    melt_spread=0.0):
+                    melt_spread=None):
     """Critical drop height of a scene [m].
 
     Parameters
@@ -127,12 +128,14 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         extrapolation or coarse start).
     melt_width : float, optional
         Width of the smoothed melting step [K]; default :func:`melt_width_for_rtol`.
-    melt_spread : float
-        Experimental (default 0, the calibrated solver): spread each HE cell's melting step
-        over its own temperature range, ``melt_spread`` times it
-        (:data:`skidmc.physics.thermal.MELT_SPREAD` = 1 measured) [1]. 2-3x cheaper
-        simulations; the error model was calibrated without it (docs/model.md, "Melting spread
-        over a cell"), so only the a posteriori estimate of the default search covers it.
+    melt_spread : float, optional
+        Spread of each HE cell's melting step over the cell's own temperature range, as a
+        multiple of it [1], in [0, 1.5]. Default: :data:`skidmc.physics.thermal.MELT_SPREAD`
+        (1) in the default search, whose a posteriori estimate was calibrated with it
+        (3-4x fewer time steps at rtol 1e-3; docs/model.md, "Melting spread over a cell"); 0
+        (the fixed step the calibrated level model was fitted on) when ``level``, ``model``
+        or ``extrapolate=False`` fixes the plan (given with a fixed plan, the reported
+        calibrated estimate may understate its error by up to 8 %).
 
     Returns
     -------
@@ -154,7 +157,8 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     if melt_width is not None and not (isinstance(melt_width, (int, float))
                                        and melt_width > 0.0):
         raise SceneError("melt_width", melt_width, "must be a number > 0 [K]")
-    if not (isinstance(melt_spread, (int, float)) and 0.0 <= melt_spread <= 1.5):
+    if melt_spread is not None and not (isinstance(melt_spread, (int, float))
+                                        and 0.0 <= melt_spread <= 1.5):
         # Beyond ~1.5 the first HE cell's Newton iterations stopped converging (2.0 failed on
         # paper-gold).
         raise SceneError("melt_spread", melt_spread, "must be a number in [0, 1.5]")
@@ -162,6 +166,8 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     # rtol, the calibrated model choosing only the first pair. A forced level, a given model or
     # extrapolate=False keep one plan, with the calibrated model's estimate.
     adaptive = level is None and model is None and extrapolate is not False
+    if melt_spread is None:
+        melt_spread = MELT_SPREAD if adaptive else 0.0
     if adaptive:
         level, extrapolate = first_pair_level(rtol), True
     elif level is None:
@@ -238,23 +244,25 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
       narrow further: then the estimate stays above rtol and says so.
     """
     melt_width = common["melt_width"]
+    spread = common["melt_spread"]
     if impact_constants(scene.mu, scene.flow_stress, scene.billet_mass, scene.billet_diameter,
                         scene.angle, scene.tilt)[3] == EXIT_STOPS_SLIDING:
-        coarse_tol, fine_tol = jump_root_tolerances(rtol, level, melt_width)
+        coarse_tol, fine_tol = jump_root_tolerances(rtol, level, melt_width, spread)
     else:
-        coarse_tol = pair_root_tolerance(rtol, level, melt_width)
+        coarse_tol = pair_root_tolerance(rtol, level, melt_width, spread)
         fine_tol = 0.5 * coarse_tol
     coarse = _search(scene, rtol, level - 1.0, coarse_tol, h_guess=h_guess, **common)
     fine = _fine_search(scene, rtol, level, fine_tol, coarse, coarse_tol, common)
     evaluations = coarse.evaluations + fine.evaluations
     melt, extra = _melt_width_bias(scene, coarse, common)
     evaluations += extra
-    res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol), melt_width, True, melt)
+    res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol), melt_width, True, melt,
+                      spread)
     narrowed = 0
     for _ in range(MAX_ADAPTIVE_ROUNDS):
         if not (res.extrapolated and res.error_estimate > rtol * (1.0 + 1e-12)):
             break
-        pair = a_posteriori_error(res.richardson_correction, coarse.level)
+        pair = a_posteriori_error(res.richardson_correction, coarse.level, spread)
         room = rtol - pair - res.melt_bias_estimate
         # Never below the coarse level's floor: a step far narrower than a level resolves is
         # badly wrong there (model.MELT_WIDTH_LEVEL0).
@@ -278,7 +286,7 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
                         / res.melt_bias_estimate)
             common = dict(common, melt_width=width)
             narrowed += 1
-            x_tol = pair_root_tolerance(rtol, fine.level, width)
+            x_tol = pair_root_tolerance(rtol, fine.level, width, spread)
             coarse = _search(scene, rtol, coarse.level, x_tol, h_guess=coarse.critical_height,
                              overshoot=2.0 * res.melt_bias_estimate + x_tol,
                              slope=margin_slope(coarse.history),
@@ -297,7 +305,7 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
             # level. Its correction should shrink 4x; half is assumed.
             correction = res.richardson_correction
             room = (rtol - res.melt_bias_estimate
-                    - a_posteriori_error(0.5 * correction, fine.level))
+                    - a_posteriori_error(0.5 * correction, fine.level, spread))
             tight = min(MAX_ROOT_TOLERANCE,
                         max(0.5 * ROOT_SHARE * rtol, (3.0 * room - fine_tol) / 4.0))
             guess = res.critical_height * (1.0 - 0.25 * correction)
@@ -311,7 +319,7 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
         else:
             break
         res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol),
-                          common["melt_width"], True, melt)
+                          common["melt_width"], True, melt, spread)
     res.evaluations = evaluations
     res.wall_time = time.perf_counter() - start
     return res
@@ -374,7 +382,7 @@ def _melt_width_bias(scene, coarse, common):
     return MELT_SHIFT_FACTOR * abs(m_wide - m_go) / -slope, 1
 
 
-def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None):
+def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None, melt_spread=0.0):
     """The Richardson value of a pair of searches (a new result; ``fine`` if either is censored).
 
     Its ``error_estimate`` [1] is, for the default (``adaptive``) search, measured on the pair:
@@ -393,7 +401,8 @@ def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None):
     if adaptive:
         # The width's bias: the calibrated bound, or what this scene measured if larger.
         res.melt_bias_estimate = max(melt_bias_bound(fine.terms, melt_width), melt or 0.0)
-        res.error_estimate = (a_posteriori_error(res.richardson_correction, coarse.level)
+        res.error_estimate = (a_posteriori_error(res.richardson_correction, coarse.level,
+                                                 melt_spread)
                               + res.melt_bias_estimate + x_tol)
     else:
         res.error_estimate = (extrapolated_error(fine.level) + x_tol
@@ -435,7 +444,8 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         coarse = _search(scene, rtol, level - COARSE_GAP,
                          max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)), h_min=h_min,
                          h_max=h_max, method=method, melting=melting,
-                         runaway_fraction=runaway_fraction, melt_width=melt_width)
+                         runaway_fraction=runaway_fraction, melt_width=melt_width,
+                         melt_spread=melt_spread)
         coarse_evaluations = coarse.evaluations
         if coarse.censored is None:
             h_guess = coarse.critical_height
