@@ -45,6 +45,7 @@ from skidmc.solver.results import HeightResult
 from skidmc.solver.roots import (
     FAST_GUESS_ERROR,
     FOLD_SLOPE,
+    JUMP_SLOPE,
     bisection_root,
     brent_root,
     go_side_root,
@@ -469,14 +470,20 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
 
     x_min, x_max = math.log(h_min), math.log(h_max)
     x_root = None
+    # A margin that jumped at the root of the search the guess came from (a coarser level, or
+    # this one at a looser tolerance) is searched by its signs (prior_bisection_root): its
+    # go side says nothing about where the jump lies.
+    jumped = slope is not None and slope < -JUMP_SLOPE
     if method == "bisection":
         x_root, censored = bisection_root(margin, x_min, x_max, x_tol)
-    elif h_guess is not None and model.exit_kind == "rebound":
+    elif h_guess is not None and model.exit_kind == "rebound" and not jumped:
         x_root = go_side_root(margin, math.log(h_guess), go_slope, x_tol, x_min, x_max,
                                guess_error=overshoot or FAST_GUESS_ERROR, points=points)
         censored = None
     elif h_guess is not None:
-        # Sliding stops before rebound: the margin jumps at the root, so only the signs of its
+        # Sliding stops before rebound, or the guess's search saw the margin jump at its root
+        # (``slope`` steeper than JUMP_SLOPE: some rebound scenes, whose event either comes
+        # before the exit or not at all): the margin jumps at the root, so only the signs of its
         # values locate it. The prior of the root: the fast tier's height and its measured
         # scatter there, or (a coarser level's root, a re-search) half the guess's uncertainty
         # up, with a third of that as its spread (the fine root of a Richardson pair lies
