@@ -22,6 +22,7 @@ __all__ = [
     "FAST_GUESS_ERROR",
     "FOLD_SLOPE",
     "GO_BEND",
+    "GO_MIN_SEPARATION",
     "GO_SECANT_SPAN",
     "JUMP_SLOPE",
     "PRIOR_TAIL",
@@ -55,11 +56,21 @@ DEFAULT_GO_SLOPE_ERROR = 0.3
 CARRIED_GO_SLOPE_ERROR = 0.15
 #: Go points farther than this from the root [1, in ln H] are not used for the secant slope.
 GO_SECANT_SPAN = 0.1
+#: Closest spacing [1, in ln H] of the two go points of a secant: the margin's ~1e-5 step-size
+#: noise then moves the secant's slope by ~1 % at most.
+GO_MIN_SEPARATION = 2e-3
 #: Bend of the go-side margin [1]: a secant through go points at distances d_a < d_b (in
 #: ln H) from the root misses it by about GO_BEND * d_a * d_b (a quadratic's interpolation
-#: error, kappa d_a d_b / (2 |s|)). Measured 0.39 on paper2-quartz (secant through d = 0.034
-#: and 0.106 missed by 1.4e-3); 1.0 leaves a factor 2.5 to spare.
-GO_BEND = 1.0
+#: error, kappa d_a d_b / (2 |s|)). ``python scripts/go_side_bend.py``
+#: (results/validation/go_side_bend.md) measures kappa = |miss| / (d_a d_b) on the presets and
+#: the off-preset scenes with a smooth go side, at the levels and widths of the default pairs:
+#: at most 9.6 from level 0.5 up (0.1-2 on most scenes; 3.7-7.6 on a pendulum whose go side
+#: is twice as steep as the presets'; 8-9.6 from the margin's ~1e-4 jitter at level 1 with a
+#: 3 K step, over the closest pairs). The first pass assumed 1.0 from one preset (0.39), and a
+#: secant accepted by it missed its root by up to 1.7 x_tol. Level 0's margin jumps by up to
+#: ~1.5e-3 between heights 0.1 % apart (kappa up to ~340 there): its discretisation, which the
+#: Richardson estimate of a pair (0, 1) covers, not a bend any secant could model.
+GO_BEND = 10.0
 #: Steepest secant [1, d margin / d ln H] across a bracket of a margin that is smooth through
 #: its root: t_ev ~ H^-s gives |slope| 1.1-1.35 on the go side, ~30 % less on the no-go side.
 #: A jump (the event before the heating fades, or never) gives 0.3-0.5 of margin over a
@@ -147,15 +158,19 @@ def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
             go.sort()
         if go and lo is not None and lo[0] >= go[0][0]:
             return None  # not monotone at this scale: leave it to Brent
-        if go and lo is not None and _is_jump(lo, go[0]):
-            # The margin jumps at the root: no extrapolation holds; halve the bracket.
+        if go and lo is not None and not _is_smooth(lo, go[0]):
+            # The margin jumps (or is too steep to interpolate) at the root: no extrapolation
+            # holds; halve the bracket.
             return guided_root(margin, 0.5 * (lo[0] + go[0][0]), None, x_tol, x_min, x_max,
                                points=[lo, go[0]])
         if go:
             xa, ma = go[0]
             far = [p for p in go[1:] if p[0] - xa <= GO_SECANT_SPAN]
             if far:
-                xb, mb = far[-1]
+                # The closest go point at least GO_MIN_SEPARATION beyond xa (the smallest bend
+                # error d_a d_b with the noise kept out of the slope), else the farthest.
+                spaced = [p for p in far if p[0] - xa >= GO_MIN_SEPARATION]
+                xb, mb = spaced[0] if spaced else far[-1]
                 secant = (mb - ma) / (xb - xa)
                 if not secant < 0.0:
                     return None
@@ -199,14 +214,17 @@ def go_side_root(margin, x_guess, slope, x_tol, x_min, x_max, *, guess_error,
     return None
 
 
-def _is_jump(lo, hi):
-    """Whether the bracket ``lo`` = (x, m > 0), ``hi`` = (x, m <= 0) straddles a jump [bool].
+def _is_smooth(lo, hi):
+    """Whether the bracket ``lo`` = (x, m > 0), ``hi`` = (x, m <= 0) may be interpolated [bool].
 
-    A margin that is smooth through its root has |d m / d ln H| ~ 1-1.35 (t_ev ~ H^-s); one
-    whose secant across the bracket is steeper than :data:`JUMP_SLOPE` jumps there: the event
-    either comes before the heating fades or not at all (a fold of the ignition problem).
+    Its secant is no steeper than :data:`FOLD_SLOPE` (the smooth margin's |slope| is 1.1-1.35
+    on the go side, ~30 % less on the no-go side). A steeper bracket holds a jump (the event
+    either comes before the heating fades or not at all: secants of hundreds across brackets
+    of ~1e-3, :data:`JUMP_SLOPE`) or the fold's steep approach, where linear interpolation inside a
+    4 x_tol bracket missed the root by 1.3 x_tol (alumina-vertical-5 at level 0, secant slope
+    8): it is halved to 2 x_tol instead.
     """
-    return (lo[1] - hi[1]) > JUMP_SLOPE * (hi[0] - lo[0])
+    return (lo[1] - hi[1]) <= FOLD_SLOPE * (hi[0] - lo[0])
 
 
 def _closer_bracket(lo, hi, x, m):
@@ -232,7 +250,7 @@ def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=40, *, s
     slope's relative change, < x_tol). The first step uses ``slope`` (d margin / d ln H from
     a coarser search; -1, the t_ev ~ 1/H scaling, when not known).
 
-    Where the margin jumps at the root (:func:`_is_jump`: sliding stops before rebound, or a
+    Where the margin jumps at the root (not :func:`_is_smooth`: sliding stops before rebound, or a
     heating pulse that fades before the exit, so that the event comes before the fade or never)
     its values say nothing about where in the bracket the root lies: the bracket is halved
     until it is at most ``2 x_tol`` wide and its midpoint returned (error <= x_tol). One-sided
@@ -260,7 +278,7 @@ def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=40, *, s
         if lo is not None and hi is not None:
             if lo[0] >= hi[0]:
                 return None  # not monotone at this scale: leave it to Brent
-            if _is_jump(lo, hi):
+            if not _is_smooth(lo, hi):
                 if hi[0] - lo[0] <= 2.0 * x_tol:
                     return 0.5 * (lo[0] + hi[0])
                 x = 0.5 * (lo[0] + hi[0])
@@ -305,7 +323,7 @@ def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max, max_simula
                          slope=None, points=()):
     """Root of a margin that may jump at its root, from a guess with a known spread; or None.
 
-    Where sliding stops before rebound the margin jumps at the root (:func:`_is_jump`): its
+    Where sliding stops before rebound the margin jumps at the root (not :func:`_is_smooth`): its
     values say nothing about where the root lies, only their signs do. With the root's prior
     ln H ~ N(``x_guess``, ``sigma``^2) (the guess's measured scatter), each simulation is placed
     at the prior's median inside the current bracket (one end may still be missing), which
@@ -331,7 +349,7 @@ def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max, max_simula
         if lo is not None and hi is not None:
             if lo[0] >= hi[0]:
                 return None  # not monotone at this scale: leave it to Brent
-            if not _is_jump(lo, hi):
+            if _is_smooth(lo, hi):
                 root = lo[0] + lo[1] * (hi[0] - lo[0]) / (lo[1] - hi[1])
                 return guided_root(margin, root, slope, x_tol, x_min, x_max,
                                    points=[lo, hi])
