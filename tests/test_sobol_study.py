@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -72,6 +73,23 @@ def test_growth_reuses_every_row_and_stops_when_stable(tmp_path):
     again = run_until_stable(study, tmp_path / "g.h5", workers=1, progress=False,
                              solver=fake_height, resamples=200, log=lines.append)
     assert [(s["n"], s["new_rows"]) for s in again] == [(ns[-1], 0)]
+
+
+def test_force_discards_an_interrupted_growth_of_an_earlier_run(tmp_path):
+    # An earlier growth interrupted mid-step leaves <out>.grow.h5 (here: a complete file of
+    # another N). `--force` recomputes everything: the leftover must neither stop the run
+    # (it once failed with "holds a run ... with other samples per scene") nor be resumed.
+    study = tmp_path / "grow.toml"
+    study.write_text(GROWING)
+    out = tmp_path / "g.h5"
+    first = run_until_stable(study, out, workers=1, progress=False, solver=fake_height,
+                             resamples=200, log=lambda line: None)
+    shutil.copy(out, tmp_path / "g.grow.h5")
+    again = run_until_stable(study, out, workers=1, progress=False, solver=fake_height,
+                             resamples=200, force=True, log=lambda line: None)
+    assert [s["n"] for s in again] == [s["n"] for s in first]
+    assert again[0]["new_rows"] == again[0]["rows"]   # recomputed from the study's N
+    assert not (tmp_path / "g.grow.h5").exists()
 
 
 def test_n_max_only_for_saltelli():

@@ -77,6 +77,8 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
     force : bool
         Recompute from the study's N even where the result file already holds a complete run
         of this study (by default such a run is the starting point: nothing is recomputed).
+        An interrupted growth step (``<out>.grow.h5``) is resumed without ``force`` when it
+        belongs to this study and the N it grows to; otherwise it is discarded.
     log : callable
         Receives one line per step.
 
@@ -99,6 +101,11 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
     if path.suffix != ".h5":
         path = path / "ensemble.h5"
     n = design.n
+    grown = path.with_name(path.stem + ".grow.h5")
+    if force and grown.is_file():
+        # An interrupted growth of an earlier run: --force recomputes everything, so its rows
+        # (perhaps of other code or another N) must not be resumed into this run.
+        grown.unlink()
     info = inspect_file(path) if path.is_file() else None
     if (not force and info and info.get("skidmc") and info["complete"]
             and info.get("study_sha256") == study.sha256):
@@ -115,7 +122,12 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
                 and info["n_rows"] == rows and info.get("study_sha256") == study.sha256):
             new_rows = 0  # this N is already computed (a rerun of the command)
         elif previous_rows:
-            grown = path.with_name(path.stem + ".grow.h5")
+            if grown.is_file():
+                # An interrupted growth is resumed only if it is this N's of this study.
+                stale = inspect_file(grown)
+                if not (stale.get("skidmc") and stale["n_rows"] == rows
+                        and stale.get("study_sha256") == study.sha256):
+                    grown.unlink()
             if not grown.is_file():
                 with EnsembleFile.create(grown, current,
                                          history=f"grown from N = {n // 2}") as f:
