@@ -16,9 +16,10 @@ The melting step's width w is, by default, the solver's floor at each level
 (``skidmc.solver.model.melt_width_floor``: 2 K * 2**-L, the rule the error model was calibrated
 with). ``--melt-width W`` holds it at W kelvin at every level instead, as the solver does
 when rtol sets a wider step (``melt_width_for_rtol``); the files then get a ``_wW`` suffix.
-``--melt-spread S`` runs every level with the experimental per-cell melting spread S
-(``critical_height(..., melt_spread=S)``); the files get an ``_sS`` suffix. Its data are what a
-recalibration of the error model for that option would start from (docs/model.md).
+``--melt-spread S`` runs every level with the per-cell melting spread S
+(``critical_height(..., melt_spread=S)``; the default search's is 1); the files get an ``_sS``
+suffix. With ``--melt-width W --melt-spread 1`` (W = 0.35, 1, 2, 3, 4 K) they calibrate the
+default search's a posteriori ratios (``skidmc.solver.plan.RICHARDSON_RESIDUAL_RATIO_SPREAD``).
 """
 
 from __future__ import annotations
