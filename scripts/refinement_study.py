@@ -63,6 +63,17 @@ CASES = {
 }
 
 
+def richardson_pairs(heights, levels):
+    """(L, R, c) for each pair (L - 1, L) with L >= 1: the Richardson value
+    R = H_L + (H_L - H_{L-1}) / 3 [m] and its relative correction c = (H_L - H_{L-1}) / (3 R)."""
+    for i, lv in enumerate(levels):
+        if lv < 1.0:
+            continue
+        j = levels.index(lv - 1.0)
+        r = heights[i] + (heights[i] - heights[j]) / 3.0
+        yield lv, r, (heights[i] - heights[j]) / (3.0 * r)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--melt-width", type=float, default=None,
@@ -145,11 +156,8 @@ def main():
     r_worst = {}
     for case, (h, conv, _) in table.items():
         cells = []
-        for i, lv in enumerate(levels):
-            if lv < 1.0:
-                continue
-            j = levels.index(lv - 1.0)
-            r_err = abs((h[i] + (h[i] - h[j]) / 3.0) / conv - 1)
+        for lv, r, _ in richardson_pairs(h, levels):
+            r_err = abs(r / conv - 1)
             r_worst[lv] = max(r_worst.get(lv, 0.0), r_err)
             cells.append(f"{r_err:.1e}")
         lines.append(f"| {case} | " + " | ".join(cells) + " |")
@@ -177,13 +185,8 @@ def main():
     ratio_worst = {}
     for case, (h, conv, _) in table.items():
         cells = []
-        for i, lv in enumerate(levels):
-            if lv < 1.0:
-                continue
-            j = levels.index(lv - 1.0)
-            r = h[i] + (h[i] - h[j]) / 3.0
-            c = abs((h[i] - h[j]) / (3.0 * r))
-            ratio = abs(r / conv - 1) / c if c > 0.0 else math.inf
+        for lv, r, c in richardson_pairs(h, levels):
+            ratio = abs(r / conv - 1) / abs(c) if c != 0.0 else math.inf
             ratio_worst[lv] = max(ratio_worst.get(lv, 0.0), ratio)
             cells.append(f"{ratio:.2f}")
         lines.append(f"| {case} | " + " | ".join(cells) + " |")
