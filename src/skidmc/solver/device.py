@@ -74,6 +74,7 @@ from skidmc.solver.plan import (
     MAX_ROOT_TOLERANCE,
     MELT_SHARE,
     ROOT_SHARE,
+    TIGHTEN_FRACTION,
     a_posteriori_error,
     modelled_error,
 )
@@ -446,16 +447,18 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
             break
         room = rtol - pair - melt_bias
         if room >= ROOT_SHARE * rtol * (1.0 - 1e-9):
-            # Tighten the roots from their brackets: the fine one alone when that suffices.
-            tight = (3.0 * room - coarse_tol) / 4.0
+            # Tighten the roots from their brackets: the fine one alone when that suffices
+            # (aiming at TIGHTEN_FRACTION of the room, as the CPU search does).
+            aim = TIGHTEN_FRACTION * room
+            tight = (3.0 * aim - coarse_tol) / 4.0
             before = coarse[6] + fine[6]
-            if tight >= 0.25 * room:
+            if tight >= 0.25 * aim:
                 _tighten(row, sc, fine_level, melt_width, tight, work, info, fine)
                 fine_tol = tight
             else:
-                _tighten(row, sc, coarse_level, melt_width, room, work, info, coarse)
-                _tighten(row, sc, fine_level, melt_width, 0.5 * room, work, info, fine)
-                coarse_tol, fine_tol = room, 0.5 * room
+                _tighten(row, sc, coarse_level, melt_width, aim, work, info, coarse)
+                _tighten(row, sc, fine_level, melt_width, 0.5 * aim, work, info, fine)
+                coarse_tol, fine_tol = aim, 0.5 * aim
             evaluations += coarse[6] + fine[6] - before
             if coarse[7] == 0.0 or fine[7] == 0.0:
                 out[OUT_STATUS], out[OUT_EVALUATIONS] = STATUS_CPU, evaluations

@@ -29,6 +29,7 @@ from skidmc.solver.plan import (
     MAX_ROOT_TOLERANCE,
     MELT_SHARE,
     ROOT_SHARE,
+    TIGHTEN_FRACTION,
     a_posteriori_error,
     extrapolated_error,
     first_pair_level,
@@ -281,14 +282,16 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
         floor = melt_width_floor(coarse.level)
         if room >= ROOT_SHARE * rtol * (1.0 - 1e-9):
             # Tighten the roots: the fine one alone when the coarse one's error still fits.
-            tight = (3.0 * room - coarse_tol) / 4.0
-            if tight >= 0.25 * room:
+            # They aim at TIGHTEN_FRACTION of the room: the pair's correction moves with them.
+            aim = TIGHTEN_FRACTION * room
+            tight = (3.0 * aim - coarse_tol) / 4.0
+            if tight >= 0.25 * aim:
                 fine, n = _tighten(scene, rtol, fine, fine_tol, tight, common)
                 fine_tol = tight
             else:
-                coarse, n = _tighten(scene, rtol, coarse, coarse_tol, room, common)
-                fine, m = _tighten(scene, rtol, fine, fine_tol, 0.5 * room, common)
-                coarse_tol, fine_tol, n = room, 0.5 * room, n + m
+                coarse, n = _tighten(scene, rtol, coarse, coarse_tol, aim, common)
+                fine, m = _tighten(scene, rtol, fine, fine_tol, 0.5 * aim, common)
+                coarse_tol, fine_tol, n = aim, 0.5 * aim, n + m
             evaluations += n
         elif (res.melt_bias_estimate > 2.0 * MELT_SHARE * rtol and narrowed < 2
               and common["melt_width"] > floor * (1.0 + 1e-9)):
