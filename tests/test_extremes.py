@@ -496,3 +496,18 @@ def test_whole_box_returns_a_height_or_a_censoring(case):
 @given(case=box_scenes())
 def test_whole_box_many(case):
     _box_case(case)
+
+
+def test_an_extrapolation_beyond_h_max_is_censored_above():
+    # Found by test_trend_property_many[prefactor]: both roots of the Richardson pair lie just
+    # below h_max = 1 km and their extrapolation above it (1002 m was returned uncensored).
+    scene = make_scene(preset="paper-alumina-smooth", **{
+        "mu": 0.04515491028971929, "angle": 14.875, "flow_stress": 2884897.7057018704,
+        "billet_mass": 0.30025444914408245, "initial_temperature": 305.625,
+        "kinetics.activation_temperature": 15000.0, "kinetics.prefactor": math.exp(47.03125),
+        "target.conductivity": 1.3042458747676378})
+    assert solve(scene).censored == "above"   # solve() checks H_MIN < H < H_MAX if uncensored
+    from skidmc.solver.cuda import solve_scenes
+
+    device = solve_scenes([scene], backend="cpu", rtol=RTOL, h_min=H_MIN, h_max=H_MAX)[0]
+    assert device.censored == "above" or H_MIN < device.critical_height < H_MAX

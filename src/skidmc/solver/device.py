@@ -491,6 +491,12 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
             break
     out[OUT_HEIGHT] = height
     out[OUT_CENSOR] = CENSOR_NONE
+    # As the CPU search (search._censor_beyond_bounds): an extrapolation beyond a bound is
+    # censored there.
+    if height >= h_max:
+        out[OUT_HEIGHT], out[OUT_CENSOR] = h_max, CENSOR_ABOVE
+    elif height <= h_min:
+        out[OUT_HEIGHT], out[OUT_CENSOR] = h_min, CENSOR_BELOW
     out[OUT_ERROR] = estimate
     out[OUT_EVALUATIONS] = evaluations
     out[OUT_LEVEL] = fine_level

@@ -209,7 +209,7 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
     coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
     fine = _fine_search(scene, rtol, level, 0.5 * x_tol, coarse, x_tol, common)
-    res = _richardson(coarse, fine, x_tol, melt_width, False)
+    res = _censor_beyond_bounds(_richardson(coarse, fine, x_tol, melt_width, False), h_min, h_max)
     res.evaluations = coarse.evaluations + fine.evaluations
     res.wall_time = time.perf_counter() - start
     return res
@@ -335,6 +335,7 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
             break
         res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol),
                           common["melt_width"], True, melt, spread)
+    res = _censor_beyond_bounds(res, common["h_min"], common["h_max"])
     res.evaluations = evaluations
     res.wall_time = time.perf_counter() - start
     return res
@@ -413,6 +414,21 @@ def _melt_width_bias(scene, coarse, common):
     if not math.isfinite(m_wide):
         return None, 1
     return MELT_SHIFT_FACTOR * abs(m_wide - m_go) / -slope, 1
+
+
+def _censor_beyond_bounds(res, h_min, h_max):
+    """``res`` censored at the search bound its extrapolated height crossed [a new result].
+
+    Both roots of a Richardson pair lie inside [h_min, h_max], but their extrapolation may not:
+    a fine root just below h_max with a coarse one below it extrapolates above (the extremes
+    matrix's box: 1002 m with h_max = 1000 m). The converged model then has no event at the
+    bound, which is what "above" says (and "below" for h_min); the error estimate is kept.
+    """
+    if res.censored is not None or h_min < res.critical_height < h_max:
+        return res
+    censored = "above" if res.critical_height >= h_max else "below"
+    return dataclasses.replace(res, censored=censored, extrapolated=False,
+                               critical_height=h_max if censored == "above" else h_min)
 
 
 def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None, melt_spread=0.0):
