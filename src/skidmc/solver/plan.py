@@ -92,7 +92,8 @@ RICHARDSON_RESIDUAL_RATIO = 0.5
 RICHARDSON_RESIDUAL_RATIO_LEVEL0 = 0.75
 #: With the melting spread over each HE cell (:data:`skidmc.physics.thermal.MELT_SPREAD`, the
 #: default search's), the levels' errors fall faster than 4x per level from about level 1.5
-#: on, while the spread fades out of the cells (observed order 2.1-2.6 from L = 1 to 3), and a
+#: on, while the spread fades out of the cells (observed order 2.0-3.0 from L = 1 to 3, the
+#: higher the narrower the width), and a
 #: second-order extrapolation overshoots: by |4 - 2^p| / (2^p - 1) of its correction for a
 #: pure order p per level (0.57 at p = 3), by at most the whole correction for any p >= 1.32
 #: with errors of one sign. The refinement study at the fixed widths the search uses
@@ -120,8 +121,8 @@ LIKELY_CORRECTION_FRACTION = 0.75
 TIGHTEN_FRACTION = 0.9
 #: Widest root tolerance on ln H [1]: the root finders' acceptance rules assume brackets of at
 #: most ~2 % (4 x_tol: linear interpolation across the no-go side's bend, whose slope changes
-#: by ~30 % within 0.5 % of H_c, and :data:`skidmc.solver.roots.JUMP_SLOPE`, which separates a
-#: jump from a smooth margin in brackets up to ~3 %).
+#: by ~30 % within 0.5 % of H_c, and :data:`skidmc.solver.roots.FOLD_SLOPE` and ``JUMP_SLOPE``,
+#: which separate a steep or jumping margin from a smooth one in brackets up to ~3 %).
 MAX_ROOT_TOLERANCE = 5e-3
 #: Finest level the default search refines to when its a posteriori estimate exceeds rtol.
 MAX_ADAPTIVE_LEVEL = 4.0

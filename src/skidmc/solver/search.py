@@ -17,11 +17,12 @@ acted yet. The report's own method, geometric bisection on go/no-go, is kept as
 
 
 import dataclasses
+import functools
 import math
 import time
 
 from skidmc.errors import SceneError
-from skidmc.physics.mechanics import EXIT_STOPS_SLIDING, impact_constants
+from skidmc.physics.mechanics import EXIT_STOPS_SLIDING, impact_constants, sliding_velocity
 from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.solver.model import build_model, melt_width_floor
 from skidmc.solver.plan import (
@@ -349,14 +350,16 @@ def _margin_likely_jumps(scene):
     Only the first root tolerances depend on it (:func:`skidmc.solver.plan.jump_root_tolerances`
     where halvings are what a root costs); every estimate uses the tolerances actually used.
     """
-    omega, _, t_exit, exit_code, slide_s, slide_c = impact_constants(
+    _, _, t_exit, exit_code, _, _ = impact_constants(
         scene.mu, scene.flow_stress, scene.billet_mass, scene.billet_diameter, scene.angle,
         scene.tilt)
     if exit_code == EXIT_STOPS_SLIDING:
         return True
-    if not slide_s > 0.0:
-        return False
-    return (slide_s - slide_c * (1.0 - math.cos(omega * t_exit))) < FADING_EXIT_SPEED * slide_s
+    speed_at = functools.partial(sliding_velocity, height=1.0, mu=scene.mu, angle=scene.angle,
+                                 tilt=scene.tilt, flow_stress=scene.flow_stress,
+                                 billet_mass=scene.billet_mass,
+                                 billet_diameter=scene.billet_diameter)
+    return speed_at(t_exit) < FADING_EXIT_SPEED * speed_at(0.0)
 
 
 def _tighten(scene, rtol, search, old_tol, tol, common):
