@@ -119,6 +119,7 @@ def main():
                 ("melting w = 2 K", 2.0, True, False, 0.0),
                 ("melting w = 4 K", 4.0, True, False, 0.0),
                 (f"melting w = 1 K, spread {MELT_SPREAD:g}", 1.0, True, False, MELT_SPREAD),
+                (f"melting w = 4 K, spread {MELT_SPREAD:g}", 4.0, True, False, MELT_SPREAD),
                 ("no melting", 1.0, False, False, 0.0),
                 ("inert", 1.0, False, True, 0.0)):
             wall, n_steps, n_rej = simulation_cost(scene, ref, 1.5, width, melting, inert,
