@@ -8,9 +8,11 @@ they pickle by reference into worker processes (which import this module from ``
 
 from __future__ import annotations
 
+import hashlib
 import math
 import multiprocessing
 import os
+import shutil
 import types
 from pathlib import Path
 
@@ -18,6 +20,33 @@ import pytest
 
 #: The repository root (``src/`` holds the package).
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _numba_cache_for_this_source():
+    """Point numba's on-disk cache at a directory keyed by a hash of the package's source.
+
+    Numba invalidates a cached function only when its own file changes: the constants it read
+    from other modules (e.g. ``plan.RICHARDSON_RESIDUAL_RATIO`` in ``solver.device``) and the
+    callees it compiled in stay as they were. A cache left by other source could then make a
+    test pass or fail. Keyed by the source, every edit gets a fresh cache (one compile per
+    source version, shared by the workers and CLI subprocesses the tests start, which inherit
+    the variable); older directories are removed. Set before anything imports numba.
+    """
+    digest = hashlib.sha256()
+    package = ROOT / "src" / "skidmc"
+    for path in sorted(package.rglob("*.py")):
+        digest.update(path.relative_to(package).as_posix().encode())
+        digest.update(path.read_bytes())
+    base = ROOT / ".numba-cache"
+    here = base / digest.hexdigest()[:16]
+    if base.is_dir():
+        for old in base.iterdir():
+            if old != here:
+                shutil.rmtree(old, ignore_errors=True)
+    os.environ["NUMBA_CACHE_DIR"] = str(here)
+
+
+_numba_cache_for_this_source()
 
 #: Two scenes x 12 samples, four uncertain keys, a correlation: the runner's test study.
 TINY = """
