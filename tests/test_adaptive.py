@@ -18,6 +18,7 @@ from skidmc.scene import get_preset, make_scene
 from skidmc.solver import critical_height
 from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K
 from skidmc.solver.plan import (
+    JUMP_COARSE_SHARE,
     MAX_ROOT_TOLERANCE,
     ROOT_SHARE,
     a_posteriori_error,
@@ -41,7 +42,7 @@ def test_pair_root_tolerance_is_the_room_left_or_the_root_share(rtol):
 
 @pytest.mark.parametrize("spread", [0.0, MELT_SPREAD])
 @pytest.mark.parametrize("rtol", [3e-2, 1e-2, 3e-3, 1e-3, 1e-4])
-def test_jump_root_tolerances_spend_the_room_where_halvings_are_fewest(rtol, spread):
+def test_jump_root_tolerances_spend_the_room_split_as_measured(rtol, spread):
     level = first_pair_level(rtol)
     width = melt_width_for_rtol(rtol, level)
     coarse, fine = jump_root_tolerances(rtol, level, width, spread)
@@ -49,12 +50,13 @@ def test_jump_root_tolerances_spend_the_room_where_halvings_are_fewest(rtol, spr
                  + MELT_WIDTH_BIAS_PER_K * width)
     room = max(ROOT_SHARE * rtol, rtol - predicted)
     # The Richardson value's root error (4 fine + coarse) / 3 fills the room the pair is likely
-    # to leave (at least ROOT_SHARE rtol) unless the widest bracket caps both; split 4:1,
-    # where the halvings -ln(coarse) - ln(fine) are fewest for that sum.
+    # to leave (at least ROOT_SHARE rtol) unless the widest bracket caps both; the coarse root
+    # takes JUMP_COARSE_SHARE of the room (2:1, the split measured cheapest in cell-steps).
     assert max(coarse, fine) <= MAX_ROOT_TOLERANCE
     assert (4.0 * fine + coarse) / 3.0 <= room * (1 + 1e-12)
     if coarse < MAX_ROOT_TOLERANCE:
-        assert coarse == pytest.approx(4.0 * fine)
+        assert coarse == pytest.approx(JUMP_COARSE_SHARE * room)
+        assert coarse == pytest.approx(2.0 * fine)
         assert (4.0 * fine + coarse) / 3.0 == pytest.approx(room)
 
 

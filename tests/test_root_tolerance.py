@@ -69,7 +69,7 @@ def test_the_box_has_fading_rebound_scenes():
 
 @pytest.mark.parametrize(("label", "scene"), FADING, ids=[label for label, _ in FADING])
 def test_fading_rebound_prior_and_root(label, scene):
-    x_tol = 2e-4   # rtol 1e-3's coarse search (pair (0.5, 1.5), jump split 5.7e-4 or less)
+    x_tol = 2e-4   # tighter than rtol 1e-3's coarse search of a jumping pair (3.8e-4)
     found = _search(scene, 1e-3, 0.5, x_tol, melt_width=1.0, **COMMON)
     tight = _search(scene, 1e-3, 0.5, 1e-3 * x_tol, melt_width=1.0, **COMMON)
     assert found.censored is None and tight.censored is None

@@ -18,6 +18,7 @@ from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
 __all__ = [
     "DISCRETISATION_SHARE",
     "ERROR_LEVEL0",
+    "JUMP_COARSE_SHARE",
     "LIKELY_CORRECTION_FRACTION",
     "MAX_ADAPTIVE_LEVEL",
     "MAX_ROOT_TOLERANCE",
@@ -119,6 +120,17 @@ LIKELY_CORRECTION_FRACTION = 0.75
 #: (the extremes matrix's long-contact scene at rtol 3e-3, fixed step: 8 rounds, ending
 #: 1.3e-11 above rtol).
 TIGHTEN_FRACTION = 0.9
+#: Coarse root tolerance of a pair whose margin jumps, as a multiple of the root room the pair
+#: is likely to leave [1] (:func:`jump_root_tolerances`; the fine root gets (3 - it) / 4 of
+#: the room, so that the root errors' share (4 d_f + d_c) / 3 is the room). Halvings at equal
+#: cost would be fewest at d_c = 4 d_f (1.5); but a coarse halving costs about a third of a
+#: fine one, and the fine root's prior (:data:`skidmc.solver.search.FINE_SHIFT_SPREAD`) is
+#: widened by half the coarse tolerance. Measured in cell-steps summed over the 20 scenes of
+#: seeds 16 and 17 of ``skidmc.scene.validation`` whose margin is likely to jump: 1.0 cost
+#: 14 % less than 1.5 at rtol 1e-3 and 3e-3 (0.75 as much as 1.0 at 1e-3, 4 % more at 3e-3;
+#: 0.5 and 1.25 more; equal at 1e-2, where MAX_ROOT_TOLERANCE caps both), and on a held-out
+#: draw (seed 18, 14 such scenes) 13 % and 12 % less.
+JUMP_COARSE_SHARE = 1.0
 #: Widest root tolerance on ln H [1]: the root finders' acceptance rules assume brackets of at
 #: most ~2 % (4 x_tol: linear interpolation across the no-go side's bend, whose slope changes
 #: by ~30 % within 0.5 % of H_c, and :data:`skidmc.solver.roots.FOLD_SLOPE` and ``JUMP_SLOPE``,
@@ -302,14 +314,14 @@ def jump_root_tolerances(rtol, level, melt_width, melt_spread):
     (:func:`skidmc.solver.roots.prior_bisection_root`), and tightening a root later continues
     the same bisection from its bracket at no extra cost. So the first tolerances take all the
     room the pair is likely to leave (as :func:`pair_root_tolerance`, but never held back to
-    ROOT_SHARE rtol), split to cost the fewest halvings for that room: the root errors enter
-    the Richardson value as (4 d_fine + d_coarse) / 3, and -ln d_c - ln d_f is least, at a
-    given sum, for d_c = 4 d_f. Each at most :data:`MAX_ROOT_TOLERANCE`. rtol 1e-3 (pair
-    (0.5, 1.5), w = 1 K) -> (5.7e-4, 1.4e-4) instead of (2e-4, 1e-4).
+    ROOT_SHARE rtol). The root errors enter the Richardson value as (4 d_fine + d_coarse) / 3,
+    and the split is :data:`JUMP_COARSE_SHARE` of the room to the coarse root, the rest to the
+    fine one. Each at most :data:`MAX_ROOT_TOLERANCE`. rtol 1e-3 (pair (0.5, 1.5), w = 1 K) ->
+    (3.8e-4, 1.9e-4) instead of (2e-4, 1e-4).
     """
     predicted = (a_posteriori_error(predicted_correction(level), level - 1.0, melt_spread)
                  + MELT_WIDTH_BIAS_PER_K * melt_width)
     room = max(ROOT_SHARE * rtol, rtol - predicted)
-    coarse = min(MAX_ROOT_TOLERANCE, 1.5 * room)
+    coarse = min(MAX_ROOT_TOLERANCE, JUMP_COARSE_SHARE * room)
     fine = min(MAX_ROOT_TOLERANCE, (3.0 * room - coarse) / 4.0)
     return coarse, fine
