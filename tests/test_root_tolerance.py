@@ -24,7 +24,7 @@ from skidmc.solver.search import (
     FADING_FAST_SHIFT,
     FADING_FAST_SPREAD,
     FINE_SHIFT_SPREAD,
-    _fading_rebound,
+    _exit_regime,
     _fast_guess,
     _margin_likely_jumps,
     _search,
@@ -59,7 +59,8 @@ def test_roots_are_within_their_tolerance(level, width, x_tol):
 # prior FADING_FAST_SHIFT above the fast tier's height (fitted on scripts/fast_tier_error.py's
 # training set). The off-preset box's fading scenes (seeds 16 and 17) are outside that set.
 FADING = [(label, scene) for seed, n in ((16, 16), (17, 24))
-          for label, scene in off_preset_scenes(n, seed=seed) if _fading_rebound(scene)]
+          for label, scene in off_preset_scenes(n, seed=seed)
+          if _exit_regime(scene) == "fading"]
 
 
 def test_the_box_has_fading_rebound_scenes():

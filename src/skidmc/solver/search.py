@@ -371,30 +371,28 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
 
 def _margin_likely_jumps(scene):
     """Whether the scene's margin is likely to jump at its root [bool]: sliding stops before
-    rebound, or the heating fades before rebound (:func:`_fading_rebound`).
+    rebound, or the heating fades before rebound (:func:`_exit_regime`).
 
     Only the first root tolerances depend on it (:func:`skidmc.solver.plan.jump_root_tolerances`
     where halvings are what a root costs); every estimate uses the tolerances actually used.
     """
-    _, _, _, exit_code, _, _ = impact_constants(
-        scene.mu, scene.flow_stress, scene.billet_mass, scene.billet_diameter, scene.angle,
-        scene.tilt)
-    return exit_code == EXIT_STOPS_SLIDING or _fading_rebound(scene)
+    return _exit_regime(scene) != "steady"
 
 
-def _fading_rebound(scene):
-    """Whether the scene rebounds with its sliding speed at rebound (report Eq. 10) below
-    :data:`FADING_EXIT_SPEED` of the initial one [bool]: the heating fades before the exit."""
+def _exit_regime(scene):
+    """How the scene's heating ends: "stops_sliding" (before rebound), "fading" (a rebound with
+    the sliding speed at rebound, report Eq. 10, below :data:`FADING_EXIT_SPEED` of the initial
+    one) or "steady" (the other rebounds)."""
     _, _, t_exit, exit_code, _, _ = impact_constants(
         scene.mu, scene.flow_stress, scene.billet_mass, scene.billet_diameter, scene.angle,
         scene.tilt)
     if exit_code == EXIT_STOPS_SLIDING:
-        return False
+        return "stops_sliding"
     speed_at = functools.partial(sliding_velocity, height=1.0, mu=scene.mu, angle=scene.angle,
                                  tilt=scene.tilt, flow_stress=scene.flow_stress,
                                  billet_mass=scene.billet_mass,
                                  billet_diameter=scene.billet_diameter)
-    return speed_at(t_exit) < FADING_EXIT_SPEED * speed_at(0.0)
+    return "fading" if speed_at(t_exit) < FADING_EXIT_SPEED * speed_at(0.0) else "steady"
 
 
 def _tighten(scene, rtol, search, old_tol, tol, common):
@@ -563,7 +561,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     # From the fast tier's height, a rebound whose heating fades before the exit is searched
     # from the prior of its root (FADING_FAST_SHIFT above that height): the go-side search
     # would start below the root there, and its first step up overshoots by the margin's jump.
-    fading = from_fast_tier and model.exit_kind == "rebound" and _fading_rebound(scene)
+    fading = from_fast_tier and _exit_regime(scene) == "fading"
     if method == "bisection":
         x_root, censored = bisection_root(margin, x_min, x_max, x_tol)
     elif h_guess is not None and model.exit_kind == "rebound" and not (jumped or fading):
@@ -575,10 +573,10 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
         # (``slope`` steeper than JUMP_SLOPE: some rebound scenes, whose event either comes
         # before the exit or not at all): the margin jumps at the root, so only the signs of its
         # values locate it. The prior of the root: the fast tier's height and its measured
-        # scatter there, or (a coarser level's root, a re-search) half the guess's uncertainty
-        # up, with a third of that as its spread (the fine root of a Richardson pair lies
-        # 0.30-0.46 of the coarse level's modelled error above the coarse one on the
-        # stops-sliding scenes of benchmarks/solver.py; the guess starts at 0.375).
+        # scatter there (FADING_FAST_SHIFT above it where the heating fades), or (a coarser
+        # level's root, a re-search) half the guess's uncertainty up, with guess_sigma or a
+        # third of that as its spread (a Richardson pair's fine search: 0.375 of the coarse
+        # level's modelled error up, FINE_SHIFT_SPREAD of it wide).
         if fading:
             center, sigma = math.log(h_guess) + FADING_FAST_SHIFT, FADING_FAST_SPREAD
         elif from_fast_tier:
