@@ -74,6 +74,21 @@ def richardson_pairs(heights, levels):
         yield lv, r, (heights[i] - heights[j]) / (3.0 * r)
 
 
+def pair_rows(table, levels, measure, fmt):
+    """Markdown rows (one per case) of ``measure(R, H_conv, c)`` for each Richardson pair of
+    :func:`richardson_pairs`, each cell formatted with ``fmt``, and the worst value per fine
+    level."""
+    rows, worst = [], {}
+    for case, (h, conv, _) in table.items():
+        cells = []
+        for lv, r, c in richardson_pairs(h, levels):
+            value = measure(r, conv, c)
+            worst[lv] = max(worst.get(lv, 0.0), value)
+            cells.append(fmt.format(value))
+        rows.append(f"| {case} | " + " | ".join(cells) + " |")
+    return rows, worst
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--melt-width", type=float, default=None,
@@ -153,14 +168,8 @@ def main():
         "| case | " + " | ".join(f"L{lv:g}" for lv in levels if lv >= 1.0) + " |",
         "|---|" + "---|" * sum(lv >= 1.0 for lv in levels),
     ]
-    r_worst = {}
-    for case, (h, conv, _) in table.items():
-        cells = []
-        for lv, r, _ in richardson_pairs(h, levels):
-            r_err = abs(r / conv - 1)
-            r_worst[lv] = max(r_worst.get(lv, 0.0), r_err)
-            cells.append(f"{r_err:.1e}")
-        lines.append(f"| {case} | " + " | ".join(cells) + " |")
+    rows, r_worst = pair_rows(table, levels, lambda r, conv, c: abs(r / conv - 1), "{:.1e}")
+    lines += rows
     lines += [
         "| worst case | " + " | ".join(f"{r_worst[lv]:.1e}" for lv in sorted(r_worst)) + " |",
         "| error model RICHARDSON_ERROR_LEVEL0 * 4^-L | "
@@ -182,14 +191,10 @@ def main():
         "| case | " + " | ".join(f"({lv - 1:g}, {lv:g})" for lv in levels if lv >= 1.0) + " |",
         "|---|" + "---|" * sum(lv >= 1.0 for lv in levels),
     ]
-    ratio_worst = {}
-    for case, (h, conv, _) in table.items():
-        cells = []
-        for lv, r, c in richardson_pairs(h, levels):
-            ratio = abs(r / conv - 1) / abs(c) if c != 0.0 else math.inf
-            ratio_worst[lv] = max(ratio_worst.get(lv, 0.0), ratio)
-            cells.append(f"{ratio:.2f}")
-        lines.append(f"| {case} | " + " | ".join(cells) + " |")
+    rows, ratio_worst = pair_rows(
+        table, levels, lambda r, conv, c: abs(r / conv - 1) / abs(c) if c != 0.0 else math.inf,
+        "{:.2f}")
+    lines += rows
     lines += [
         "| worst case | " + " | ".join(f"{ratio_worst[lv]:.2f}" for lv in sorted(ratio_worst))
         + " |",

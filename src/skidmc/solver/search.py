@@ -251,11 +251,11 @@ def _fine_search(scene, rtol, level, x_tol, coarse, coarse_tol, common):
     margin jumps (sliding stops), the coarse root's own tolerance ``coarse_tol`` [1] widens
     the prior of the fine root (:func:`skidmc.solver.roots.prior_bisection_root`).
     """
-    overshoot = 0.75 * modelled_error(level - 1.0)
+    coarse_error = modelled_error(level - 1.0)
     return _search(scene, rtol, level, x_tol,
                    h_guess=coarse.critical_height if coarse.censored is None else None,
-                   overshoot=overshoot,
-                   guess_sigma=FINE_SHIFT_SPREAD * modelled_error(level - 1.0) + 0.5 * coarse_tol,
+                   overshoot=0.75 * coarse_error,
+                   guess_sigma=FINE_SHIFT_SPREAD * coarse_error + 0.5 * coarse_tol,
                    slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history),
                    **common)
 
