@@ -8,15 +8,15 @@ they pickle by reference into worker processes (which import this module from ``
 
 from __future__ import annotations
 
-import hashlib
 import math
 import multiprocessing
 import os
-import shutil
 import types
 from pathlib import Path
 
 import pytest
+
+from skidmc._numba_cache import clean_other_caches, source_cache_dir
 
 #: The repository root (``src/`` holds the package).
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,19 +30,13 @@ def _numba_cache_for_this_source():
     callees it compiled in stay as they were. A cache left by other source could then make a
     test pass or fail. Keyed by the source, every edit gets a fresh cache (one compile per
     source version, shared by the workers and CLI subprocesses the tests start, which inherit
-    the variable); older directories are removed. Set before anything imports numba.
+    the variable). ``import skidmc`` does the same in a source checkout
+    (:mod:`skidmc._numba_cache`); here it is forced, over any ``NUMBA_CACHE_DIR`` already set
+    and whatever way the package was installed, and every other version's cache is removed.
+    Set before anything imports numba (``import skidmc`` does not).
     """
-    digest = hashlib.sha256()
-    package = ROOT / "src" / "skidmc"
-    for path in sorted(package.rglob("*.py")):
-        digest.update(path.relative_to(package).as_posix().encode())
-        digest.update(path.read_bytes())
-    base = ROOT / ".numba-cache"
-    here = base / digest.hexdigest()[:16]
-    if base.is_dir():
-        for old in base.iterdir():
-            if old != here:
-                shutil.rmtree(old, ignore_errors=True)
+    here = source_cache_dir(ROOT / "src" / "skidmc")
+    clean_other_caches(here, keep=0, keep_younger_than=0.0)
     os.environ["NUMBA_CACHE_DIR"] = str(here)
 
 

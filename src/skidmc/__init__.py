@@ -18,6 +18,12 @@ from __future__ import annotations
 from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
 
+from skidmc._numba_cache import configure as _configure_numba_cache
+
+# Before any kernel is compiled: in a source checkout, numba's cache keyed by the source
+# (skidmc/_numba_cache.py says why).
+_configure_numba_cache()
+
 try:
     __version__ = version("skidmc")
 except PackageNotFoundError:  # running from a source tree that is not installed
