@@ -473,7 +473,6 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
         inv_dt0 = 1.0 / dt_prev2
         c2 = dt * (dt + dt_prev) / (dt_prev + dt_prev2)
         converged = False
-        fused = False
         err = 0.0
         t_max = -math.inf
         y_max = 0.0
@@ -572,42 +571,14 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                 break
             if change < newton_tol and final:
                 converged = True
-                fused = True
                 break
+            # A step whose first update is already within tolerance takes the second, final
+            # pass too, so that one pass computes every step's final state: 1.8 % more
+            # iterations (2.14 against 2.10 per attempt, 13 scenes at levels 0.5 and 1.5 at
+            # 0.98 and 1.02 H_c), no measurable time, the same margins to 2e-16.
             for i in range(n):
                 temp_new[i] += dp[i]
-            if change < newton_tol:
-                converged = True
-                break
 
-        # Final state of the step, unless the last Newton pass computed it: enthalpies,
-        # fraction reacted (implicit, closed form), maxima and the local error.
-        if converged and not fused:
-            err = 0.0
-            t_max = -math.inf
-            y_max = 0.0
-            for i in range(n):
-                if i >= n_target:
-                    h_new[i], dhdt[i], _, _ = _he_cell_enthalpy(
-                        i, n, n_target, temp_new, width, rho_c, latent_v, melting_point,
-                        melt_width, melt_spread)
-                    j = i - n_target
-                    if reactive and temp_new[i] >= t_cold:
-                        k = prefactor * math.exp(-activation_temperature / temp_new[i])
-                        y_new[j] = (hist_y[j] + bdt * k) / (1.0 + bdt * k)
-                    else:
-                        y_new[j] = hist_y[j]
-                    if temp_new[i] > t_max:
-                        t_max = temp_new[i]
-                    if y_new[j] > y_max:
-                        y_max = y_new[j]
-                else:
-                    h_new[i] = rho_c[i] * temp_new[i]
-                if estimate:
-                    e = _local_error(i, temp_new, temp, temp_prev, temp_prev2, dt, inv_dt1,
-                                     inv_dt0, c2)
-                    if e > err:
-                        err = e
         if converged:
             if not math.isfinite(t_max):
                 converged = False
