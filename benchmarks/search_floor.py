@@ -10,7 +10,9 @@ scenes of ``benchmarks/solver.py`` (the issue-16 box and E/R = 15,000 K twice), 
 * **height**: the default search (``critical_height(scene, rtol)``), median wall time of
   repeats, with its simulations and final pair;
 * **coarse**, **fine**: one simulation of the pair's coarse and fine level at the search's
-  critical height, with the melting width and spread the search uses (median of repeats);
+  critical height, with the melting spread the search uses and the melting width ``rtol``
+  sets (the search narrows it further only where a scene's own melting bias asks for it, as
+  on E/R = 15,000 K; median of repeats);
 * **floor** = coarse + fine, and **height / floor**: how far the root finders are from one
   simulation per level.
 
@@ -92,8 +94,8 @@ def report(rows, repeats, load):
         f"{platform.python_version()}, one thread. Load average before the run: {load}. "
         f"Times: medians of {repeats} repeats after a warm-up. *floor* = one simulation at the "
         "pair's coarse level plus one at its fine level, at the search's critical height, with "
-        "the search's melting width and spread: what a height costs if each root finder took a "
-        "single simulation.",
+        "the search's melting spread and the melting width rtol sets: what a height costs if "
+        "each root finder took a single simulation.",
         "",
         "| rtol | scenes | n | median height | median floor | median coarse | median fine "
         "| median height / floor | median simulations |",
