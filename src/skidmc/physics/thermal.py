@@ -62,7 +62,7 @@ __all__ = [
 ]
 
 # Indices into the info array returned by :func:`simulate_kernel`.
-INFO_EVENT = 0          # 1.0 when a thermal event occurred before t_end
+INFO_EVENT = 0          # 1.0 when a thermal event occurred before t_stop
 INFO_T_EVENT = 1        # event time [s] (inf when none)
 INFO_STEPS = 2          # accepted time steps
 INFO_REJECTED = 3       # rejected time steps
@@ -268,10 +268,10 @@ def adiabatic_induction_time(temperature, prefactor, activation_temperature, adi
 def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                     he_density, latent_heat, melting_point, melt_width, melt_spread,
                     prefactor, activation_temperature, heat_of_reaction,
-                    q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
+                    q0, slide_s, slide_c, omega, t_exit, q_ext, t_end, t_stop,
                     initial_temperature, tol_temperature, dt_initial,
                     runaway_fraction, max_steps, record_t, record_tb):
-    """Integrate one impact from t = 0 to an event or ``t_end``.
+    """Integrate one impact from t = 0 to an event or ``t_stop``.
 
     Parameters
     ----------
@@ -303,7 +303,11 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
         Flux q(t) = q0 (s - c (1 - cos omega t)) [W/m^2] before ``t_exit`` [s]
         (Eqs. 1 and 10, q0 = mu sigma V0), ``q_ext`` [W/m^2] after it.
     t_end : float
-        End of the integration [s].
+        End of the model's horizon [s]: of the integration, unless ``t_stop`` is earlier.
+    t_stop : float
+        Where the integration stops without an event [s], t_exit <= t_stop <= t_end: a run
+        that needs only the margin's sign (go or no-go) stops at t_exit. The run up to it is
+        the same as the full run's, step for step (``t_end`` still sets the cold-source cutoff).
     initial_temperature : float
         T0 [K].
     tol_temperature : float
@@ -331,7 +335,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                   he_density, latent_heat, melting_point, melt_width, melt_spread,
                   prefactor, activation_temperature, heat_of_reaction,
-                  q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
+                  q0, slide_s, slide_c, omega, t_exit, q_ext, t_end, t_stop,
                   initial_temperature, tol_temperature, dt_initial,
                   runaway_fraction, max_steps, record_t, record_tb, record_t.shape[0],
                   np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
@@ -344,7 +348,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
 def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                   he_density, latent_heat, melting_point, melt_width, melt_spread,
                   prefactor, activation_temperature, heat_of_reaction,
-                  q0, slide_s, slide_c, omega, t_exit, q_ext, t_end,
+                  q0, slide_s, slide_c, omega, t_exit, q_ext, t_end, t_stop,
                   initial_temperature, tol_temperature, dt_initial,
                   runaway_fraction, max_steps, record_t, record_tb, n_record,
                   temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new, dhdt,
@@ -437,13 +441,13 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
     y_max_prev = 0.0
     newton_tol = NEWTON_TOLERANCE_FRACTION * tol_temperature
 
-    while t < t_end and steps + rejected < max_steps:
-        # Land exactly on t_exit (flux kink or jump) and on t_end, stretching the step
+    while t < t_stop and steps + rejected < max_steps:
+        # Land exactly on t_exit (flux kink or jump) and on t_stop, stretching the step
         # by up to 1 % rather than leaving a sliver of a step before them.
         if t < t_exit and t + 1.01 * dt > t_exit:
             dt = t_exit - t
-        if t + 1.01 * dt > t_end:
-            dt = t_end - t
+        if t + 1.01 * dt > t_stop:
+            dt = t_stop - t
         t_new = t + dt
 
         # BDF coefficients: h_new = a1 h - a2 h_prev + beta dt f(T_new).

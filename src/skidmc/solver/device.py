@@ -152,7 +152,7 @@ def _margin(x, row, sc, n_cells, share, tol_temperature, melt_width, work, info)
                   share, row[_HE_RHO], sc[_S_LATENT], row[_HE_TM], melt_width, sc[_S_SPREAD],
                   row[_Z],
                   row[_TA], row[_Q], q0, sc[_S_SLIDE_S], sc[_S_SLIDE_C], sc[_S_OMEGA],
-                  sc[_S_T_EXIT], q0 * sc[_S_EXTENSION], sc[_S_T_END], row[_T0],
+                  sc[_S_T_EXIT], q0 * sc[_S_EXTENSION], sc[_S_T_END], sc[_S_T_END], row[_T0],
                   tol_temperature, 1e-6 * sc[_S_T_EXIT], sc[_S_RUNAWAY], MAX_STEPS, work[0],
                   work[0], 0, work[0], work[1], work[2], work[3], work[4], work[5], work[6],
                   work[7], work[8], work[9], work[10], work[11], work[12], work[13], work[14],

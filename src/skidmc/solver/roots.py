@@ -93,13 +93,14 @@ def margin_slope(history):
     return None
 
 
-def _margin_inside(margin, x, x_min, x_max):
-    """The margin at ``x``, or None when x leaves (x_min, x_max) or the margin is not finite:
-    the guided searches then hand over to bracketing and Brent's method."""
+def _margin_inside(margin, x, x_min, x_max, no_event_ok=False):
+    """The margin at ``x``, or None when x leaves (x_min, x_max) or the margin is not finite
+    (with ``no_event_ok``, inf, "no event", is kept: a search by signs): the guided searches
+    then hand over to bracketing and Brent's method."""
     if not (x_min < x < x_max):
         return None
     m = margin(x)
-    return m if math.isfinite(m) else None
+    return m if math.isfinite(m) or (no_event_ok and m == math.inf) else None
 
 
 def go_side_slope(history):
@@ -320,7 +321,7 @@ _STANDARD_NORMAL = NormalDist()
 
 
 def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max, max_simulations=40, *,
-                         slope=None, points=()):
+                         slope=None, points=(), signs_only=False):
     """Root of a margin that may jump at its root, from a guess with a known spread; or None.
 
     Where sliding stops before rebound the margin jumps at the root (not :func:`_is_smooth`): its
@@ -337,7 +338,9 @@ def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max, max_simula
     across which the margin is smooth is handed to :func:`guided_root` (linear
     interpolation; ``slope`` as there). Returns None when the steps leave [x_min, x_max],
     meet a non-finite margin or contradict monotonicity: the caller then brackets and runs
-    Brent's method, reusing every simulation.
+    Brent's method, reusing every simulation. With ``signs_only`` the no-go simulations may
+    stop at the exit (margin inf, :func:`skidmc.solver.simulate` ``until_exit``): a bracket
+    with such an end is never taken as smooth, and is halved.
     """
     lo = hi = None  # (x, m) of the closest no-go (m > 0) and go (m <= 0) points
     for x, m in points:
@@ -370,7 +373,7 @@ def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max, max_simula
                 x = 0.5 * (lo[0] + hi[0])
             else:
                 x = x_guess + sigma * _STANDARD_NORMAL.inv_cdf(0.5 * (p_lo + p_hi))
-        m = _margin_inside(margin, x, x_min, x_max)
+        m = _margin_inside(margin, x, x_min, x_max, no_event_ok=signs_only)
         if m is None:
             return None
         lo, hi = _closer_bracket(lo, hi, x, m)

@@ -47,7 +47,8 @@ class Simulation:
     interface_temperature: np.ndarray | None = None  # [K]
 
 
-def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=None):
+def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=None,
+             until_exit=False):
     """Simulate the impact from drop height ``height`` [m].
 
     Parameters
@@ -59,6 +60,12 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
         Keep the interface temperature history (for checks and figures).
     flux_override : tuple, optional
         ``(q0, s, c, omega, t_exit, q_ext)`` to impose another flux shape (tests).
+    until_exit : bool
+        Stop at the exit time instead of the horizon when no event came by then: only the
+        margin's sign is wanted (a search that locates a jumping margin's root by its signs).
+        The run is the full run's up to the exit, step for step; without an event by then its
+        margin is inf, of the full run's sign, and its cost is ~40-60 % of the full run's on
+        the no-go side of a jump (the full run goes on under the extension flux to ~1.1 t_exit).
 
     Returns
     -------
@@ -79,6 +86,7 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
         model.resolution.melt_spread,
         model.prefactor, model.activation_temperature, model.heat_of_reaction,
         flux[0], flux[1], flux[2], flux[3], flux[4], flux[5], model.end_time,
+        min(flux[4], model.end_time) if until_exit else model.end_time,
         model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
         model.runaway_fraction, max_steps, rec_t, rec_tb)
     if info[INFO_FAILED] or (info[INFO_STEPS] + info[INFO_REJECTED] >= max_steps
