@@ -339,7 +339,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                   initial_temperature, tol_temperature, dt_initial,
                   runaway_fraction, max_steps, record_t, record_tb, record_t.shape[0],
                   np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n),
-                  np.empty(n), np.empty(n), np.empty(n_he), np.empty(n_he), np.empty(n_he),
+                  np.empty(n), np.empty(n_he), np.empty(n_he), np.empty(n_he),
                   np.empty(n), np.empty(n_he), np.empty(n), np.empty(n), info)
     return info
 
@@ -351,7 +351,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                   q0, slide_s, slide_c, omega, t_exit, q_ext, t_end, t_stop,
                   initial_temperature, tol_temperature, dt_initial,
                   runaway_fraction, max_steps, record_t, record_tb, n_record,
-                  temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new, dhdt,
+                  temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new,
                   y, y_prev, y_new, hist_h, hist_y, cp, dp, info):
     """:func:`simulate_kernel` on caller-owned storage, allocating nothing.
 
@@ -367,7 +367,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
         Number of cells used.
     n_record : int
         How many steps to record in ``record_t``, ``record_tb`` (0: none).
-    temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new, dhdt, hist_h, cp, dp : ndarray
+    temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new, hist_h, cp, dp : ndarray
         Work arrays of at least ``n`` cells (overwritten).
     y, y_prev, y_new, hist_y : ndarray
         Work arrays of at least ``n - n_target`` cells (overwritten).
@@ -415,7 +415,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
         temp_prev[i] = initial_temperature
         temp_prev2[i] = initial_temperature
         if i >= n_target:
-            h[i], dhdt[i] = _he_enthalpy(initial_temperature, rho_c[i], latent_v,
+            h[i], _ = _he_enthalpy(initial_temperature, rho_c[i], latent_v,
                                          melting_point, melt_width)
         else:
             h[i] = rho_c[i] * initial_temperature
@@ -503,14 +503,14 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                 dh_dlow = 0.0
                 dh_dup = 0.0
                 if i >= n_target:
-                    h_new[i], dhdt[i], dh_dlow, dh_dup = _he_cell_enthalpy(
+                    h_new[i], dh_dself, dh_dlow, dh_dup = _he_cell_enthalpy(
                         i, n, n_target, temp_new, width, rho_c, latent_v, melting_point,
                         melt_width, melt_spread)
                 else:
                     h_new[i] = rho_c[i] * temp_new[i]
-                    dhdt[i] = rho_c[i]
+                    dh_dself = rho_c[i]
                 r = width[i] * (h_new[i] - hist_h[i]) + flow_in
-                d = width[i] * dhdt[i] + g_low
+                d = width[i] * dh_dself + g_low
                 lower = width[i] * dh_dlow - g_low
                 if i < n - 1:
                     g_up = bdt * face_conductance[i]

@@ -100,9 +100,9 @@ __all__ = [
 DEVICE_MAX_LEVEL = 3.0
 #: Cells of the largest mesh a device search builds (both media).
 MAX_CELLS = 2 * int(round(BASE_RESOLUTION.cells_per_medium * 2.0**DEVICE_MAX_LEVEL))
-#: Rows of the work array: 15 for the integrator's state, then width, rho c, face conductance.
-WORK_ROWS = 18
-_ROW_WIDTH, _ROW_RHO_C, _ROW_FACE = 15, 16, 17
+#: Rows of the work array: 14 for the integrator's state, then width, rho c, face conductance.
+WORK_ROWS = 17
+_ROW_WIDTH, _ROW_RHO_C, _ROW_FACE = 14, 15, 16
 #: Most simulations one search at one level may use before it gives up (to the CPU search).
 MAX_SEARCH_EVALUATIONS = 60
 
@@ -155,8 +155,7 @@ def _margin(x, row, sc, n_cells, share, tol_temperature, melt_width, work, info)
                   sc[_S_T_EXIT], q0 * sc[_S_EXTENSION], sc[_S_T_END], sc[_S_T_END], row[_T0],
                   tol_temperature, 1e-6 * sc[_S_T_EXIT], sc[_S_RUNAWAY], MAX_STEPS, work[0],
                   work[0], 0, work[0], work[1], work[2], work[3], work[4], work[5], work[6],
-                  work[7], work[8], work[9], work[10], work[11], work[12], work[13], work[14],
-                  info)
+                  work[7], work[8], work[9], work[10], work[11], work[12], work[13], info)
     horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
     if info[INFO_FAILED] > 0.0 or (info[INFO_STEPS] + info[INFO_REJECTED] >= MAX_STEPS
                                    and not info[INFO_EVENT] > 0.0):
