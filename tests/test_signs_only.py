@@ -1,5 +1,8 @@
 """Searches by signs stop no-go simulations at the exit (simulate's ``until_exit``) and must
-change nothing but the cost: the same signs, the same go margins, the same heights."""
+change nothing but the cost: the same signs, the same go margins, the same heights.
+
+They apply where the root is located by the margin's signs: sliding stops before rebound
+(paper-gold), or a rebound whose heating fades before the exit (an off-preset scene)."""
 
 import math
 import sys
@@ -7,7 +10,10 @@ import sys
 import pytest
 
 from skidmc.scene import get_preset
+from skidmc.scene.validation import off_preset_scenes
 from skidmc.solver import build_model, critical_height, simulate
+from skidmc.solver.roots import margin_slope
+from skidmc.solver.search import _exit_regime
 
 # The module, not the function the package re-exports under the same name.
 search_module = sys.modules["skidmc.solver.search"]
@@ -40,9 +46,30 @@ def test_stopping_at_the_exit_keeps_the_run_up_to_it(gold):
         assert short.steps < full.steps
 
 
-def test_signs_only_search_finds_the_full_runs_height(gold, monkeypatch):
-    scene, _, _ = gold
+def _fading_scene():
+    """alumina-vertical-1 of the off-preset box: a rebound whose sliding speed at the exit is
+    below FADING_EXIT_SPEED of the initial one; its margin jumps at the root at levels 0.5 and
+    1.5 (slopes of -600 to -900 across the brackets of full runs)."""
+    scene = dict(off_preset_scenes())["alumina-vertical-1"]
+    assert _exit_regime(scene) == "fading"
+    return scene
+
+
+@pytest.mark.parametrize("which", ["stops_sliding", "fading"])
+def test_signs_only_search_finds_the_full_runs_height(gold, monkeypatch, which):
+    scene = gold[0] if which == "stops_sliding" else _fading_scene()
+    stopped_at_exit = []
+
+    def recording_simulate(model, height, **kwargs):
+        if kwargs.get("until_exit"):
+            stopped_at_exit.append(model.exit_kind)
+        return simulate(model, height, **kwargs)
+
+    monkeypatch.setattr(search_module, "simulate", recording_simulate)
     fast = critical_height(scene, rtol=3e-3)
+    # The search did locate the root by signs, at every level (a rebound's too).
+    expected_kind = "rebound" if which == "fading" else "stops_sliding"
+    assert stopped_at_exit and set(stopped_at_exit) == {expected_kind}
     full_runs = []
 
     def full_simulate(model, height, **kwargs):
@@ -57,3 +84,14 @@ def test_signs_only_search_finds_the_full_runs_height(gold, monkeypatch):
     assert fast.critical_height == slow.critical_height
     assert fast.evaluations == slow.evaluations
     assert fast.error_estimate == slow.error_estimate
+
+
+def test_a_no_event_point_next_to_a_go_point_reads_as_a_jump():
+    # A sign-only search's history: its closest no-go point has no event (margin inf). The
+    # next level's search must treat the margin as jumping (steeper than JUMP_SLOPE) and
+    # locate its root by signs as well, not extrapolate along a go side it cannot trust.
+    assert margin_slope([(1.00, math.inf), (1.01, -0.02), (1.03, -0.05)]) == -math.inf
+    # Full runs: the secant across the sign change, the no-event point further out ignored.
+    slope = margin_slope([(0.98, math.inf), (1.00, 0.01), (1.01, -0.02)])
+    assert slope == pytest.approx(-0.03 / math.log(1.01))
+    assert margin_slope([(1.00, math.inf), (1.01, math.inf)]) is None

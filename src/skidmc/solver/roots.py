@@ -85,11 +85,16 @@ FOLD_SLOPE = 3.0
 
 
 def margin_slope(history):
-    """d margin / d ln H [1] across the sign change of a finished search's history, or None."""
-    pts = [(math.log(h), m) for h, m in history if math.isfinite(m)]
+    """d margin / d ln H [1] across the sign change of a finished search's history, or None.
+
+    -inf where the no-go end has no event (margin inf: a run stopped at the exit, searched by
+    its signs, or none within the horizon): the margin is taken to jump there (steeper than
+    :data:`JUMP_SLOPE`), so the next search locates the root by its signs too.
+    """
+    pts = [(math.log(h), m) for h, m in history if not math.isnan(m)]
     for (x0, m0), (x1, m1) in zip(pts, pts[1:]):
         if m0 > 0.0 >= m1 and x1 > x0:
-            return (m1 - m0) / (x1 - x0)
+            return -math.inf if m0 == math.inf else (m1 - m0) / (x1 - x0)
     return None
 
 
@@ -249,7 +254,7 @@ def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=40, *, s
     bracket it; once a bracket [a, b] with m(a) > 0 >= m(b) is at most 4 x_tol wide, the
     root is the linear interpolation inside it (error below the bracket width times the
     slope's relative change, < x_tol). The first step uses ``slope`` (d margin / d ln H from
-    a coarser search; -1, the t_ev ~ 1/H scaling, when not known).
+    a coarser search; -1, the t_ev ~ 1/H scaling, when not known or infinite).
 
     Where the margin jumps at the root (not :func:`_is_smooth`: sliding stops before rebound, or a
     heating pulse that fades before the exit, so that the event comes before the fade or never)
@@ -262,7 +267,7 @@ def guided_root(margin, x0, slope, x_tol, x_min, x_max, max_simulations=40, *, s
     Returns None when the steps leave [x_min, x_max], meet a non-finite margin, or do not
     converge: the caller then brackets and runs Brent's method, reusing every simulation.
     """
-    slope = slope if slope is not None and slope < 0.0 else -1.0
+    slope = slope if slope is not None and -math.inf < slope < 0.0 else -1.0
     push = 1.5 * x_tol
     step = spread
     lo = hi = None  # (x, m) of the closest no-go (m > 0) and go (m <= 0) points

@@ -546,11 +546,21 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     cache = {math.log(h): m for h, m in known}
     n_known = len(cache)
     points = [(x, m) for x, m in cache.items() if math.isfinite(m)]
-    # Where sliding stops before rebound, the root is located by the margin's signs alone
-    # (prior_bisection_root below): a simulation without an event by the exit stops there
-    # (until_exit; margin inf) instead of going on under the extension flux to ~1.1 t_exit,
-    # which took 35-40 % of a no-go run's steps and half its time.
-    signs_only = method == "brent" and model.exit_kind != "rebound"
+    # A margin that jumped at the root of the search the guess came from (a coarser level, or
+    # this one at a looser tolerance) is searched by its signs (prior_bisection_root): its
+    # go side says nothing about where the jump lies.
+    jumped = slope is not None and slope < -JUMP_SLOPE
+    # From the fast tier's height, a rebound whose heating fades before the exit is searched
+    # from the prior of its root (FADING_FAST_SHIFT above that height): the go-side search
+    # would start below the root there, and its first step up overshoots by the margin's jump.
+    fading = from_fast_tier and _exit_regime(scene) == "fading"
+    # Where the root is located by the margin's signs alone (prior_bisection_root below: sliding
+    # stops before rebound, or a rebound's margin jumped or its heating fades), a simulation
+    # without an event by the exit stops there (until_exit; margin inf) instead of going on
+    # under the extension flux to ~1.1 t_exit, which took 35-40 % of a no-go run's steps and
+    # half its time. The verdict is the same: only events before the exit count.
+    signs_only = method == "brent" and h_guess is not None and (
+        model.exit_kind != "rebound" or jumped or fading)
     sign_only_points = set()
 
     def margin(x):
@@ -563,14 +573,6 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
 
     x_min, x_max = math.log(h_min), math.log(h_max)
     x_root = None
-    # A margin that jumped at the root of the search the guess came from (a coarser level, or
-    # this one at a looser tolerance) is searched by its signs (prior_bisection_root): its
-    # go side says nothing about where the jump lies.
-    jumped = slope is not None and slope < -JUMP_SLOPE
-    # From the fast tier's height, a rebound whose heating fades before the exit is searched
-    # from the prior of its root (FADING_FAST_SHIFT above that height): the go-side search
-    # would start below the root there, and its first step up overshoots by the margin's jump.
-    fading = from_fast_tier and _exit_regime(scene) == "fading"
     if method == "bisection":
         x_root, censored = bisection_root(margin, x_min, x_max, x_tol)
     elif h_guess is not None and model.exit_kind == "rebound" and not (jumped or fading):
