@@ -67,7 +67,7 @@ def test_signs_only_search_finds_the_full_runs_height(gold, monkeypatch, which):
 
     monkeypatch.setattr(search_module, "simulate", recording_simulate)
     fast = critical_height(scene, rtol=3e-3)
-    # The search did locate the root by signs, at every level (a rebound's too).
+    # The search located the root by signs, stopping runs at the exit (a rebound's too).
     expected_kind = "rebound" if which == "fading" else "stops_sliding"
     assert stopped_at_exit and set(stopped_at_exit) == {expected_kind}
     full_runs = []
