@@ -43,16 +43,11 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import numpy as np  # noqa: E402
 from solver import PRESETS, off_preset_scenes  # noqa: E402
 
-from skidmc.physics.thermal import (  # noqa: E402
-    INFO_NEWTON_ITERATIONS,
-    MELT_SPREAD,
-    simulate_kernel,
-)
+from skidmc.physics.thermal import MELT_SPREAD  # noqa: E402
 from skidmc.scene import get_preset  # noqa: E402
-from skidmc.solver import build_model, critical_height  # noqa: E402
+from skidmc.solver import build_model, critical_height, simulate  # noqa: E402
 from skidmc.solver.model import Resolution, level_resolution  # noqa: E402
 from skidmc.solver.search import _exit_regime  # noqa: E402
 
@@ -82,16 +77,8 @@ def height(scene, mesh_level, time_level):
 
 def newton_iterations(scene, mesh_level, time_level, h):
     """Newton iterations of one full simulation at ``h`` [m] (the kernel's own count)."""
-    m = build_model(scene, resolution(mesh_level, time_level))
-    q0 = m.flux_amplitude(h)
-    info = simulate_kernel(
-        m.width, m.rho_c, m.face_conductance, m.n_target, m.q_share_he, m.he_density,
-        m.latent_heat, m.melting_point, m.resolution.melt_width, m.resolution.melt_spread,
-        m.prefactor, m.activation_temperature, m.heat_of_reaction, q0, m.slide_s, m.slide_c,
-        m.omega, m.exit_time, q0 * m.extension_flux_factor, m.end_time, m.end_time,
-        m.initial_temperature, m.resolution.tol_temperature, m.dt_initial, m.runaway_fraction,
-        200_000, np.zeros(0), np.zeros(0))
-    return float(info[INFO_NEWTON_ITERATIONS])
+    model = build_model(scene, resolution(mesh_level, time_level))
+    return simulate(model, h).newton_iterations
 
 
 def measure(label, scene):

@@ -37,6 +37,7 @@ def test_stopping_at_the_exit_keeps_the_run_up_to_it(gold):
         # The same steps up to the event, so the same margin to the last bit.
         assert short.margin == full.margin
         assert short.steps == full.steps
+        assert short.newton_iterations == full.newton_iterations
     for factor in (0.97, 0.99):          # no-go side: no event by the exit
         full = simulate(model, factor * h_c)
         short = simulate(model, factor * h_c, until_exit=True)
@@ -44,6 +45,8 @@ def test_stopping_at_the_exit_keeps_the_run_up_to_it(gold):
         assert short.margin == math.inf and not short.event
         # The full run goes on to its event under the extension flux, ~1.1 t_exit.
         assert short.steps < full.steps
+        # Its cost in the kernel's own count: at least one Newton iteration per step attempt.
+        assert short.steps + short.rejected <= short.newton_iterations < full.newton_iterations
 
 
 def _fading_scene():

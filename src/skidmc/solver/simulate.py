@@ -11,6 +11,7 @@ import numpy as np
 from skidmc.physics.thermal import (
     INFO_EVENT,
     INFO_FAILED,
+    INFO_NEWTON_ITERATIONS,
     INFO_REJECTED,
     INFO_STEPS,
     INFO_T_EVENT,
@@ -43,6 +44,7 @@ class Simulation:
     max_temperature: float   # highest HE cell temperature reached [K]
     exit_max_temperature: float  # highest HE cell temperature at t_exit [K]
     exit_max_reacted: float  # highest fraction reacted at t_exit [1]
+    newton_iterations: int = 0  # Newton iterations over all step attempts (a run's cost)
     times: np.ndarray | None = None                  # [s]
     interface_temperature: np.ndarray | None = None  # [K]
 
@@ -105,6 +107,7 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
         max_temperature=float(info[INFO_T_MAX]),
         exit_max_temperature=float(info[INFO_T_EXIT_MAX]),
         exit_max_reacted=float(info[INFO_Y_EXIT_MAX]),
+        newton_iterations=int(info[INFO_NEWTON_ITERATIONS]),
     )
     if record:
         n = min(steps, rec_t.shape[0])
