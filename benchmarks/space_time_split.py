@@ -35,7 +35,6 @@ import os
 for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
-import math  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -43,36 +42,27 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from cost_breakdown import MELT_WIDTH, height  # noqa: E402
+from cost_breakdown import resolution as split_resolution  # noqa: E402
 from solver import PRESETS, off_preset_scenes  # noqa: E402
 
 from skidmc.physics.thermal import MELT_SPREAD  # noqa: E402
 from skidmc.scene import get_preset  # noqa: E402
-from skidmc.solver import build_model, critical_height, simulate  # noqa: E402
-from skidmc.solver.model import Resolution, level_resolution  # noqa: E402
+from skidmc.solver import build_model, simulate  # noqa: E402
 from skidmc.solver.search import _exit_regime  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
-MELT_WIDTH = 1.0        # [K]: the width rtol = 1e-3 uses (melt_width_for_rtol)
 REFERENCE_LEVEL = 3.0
 LEVELS = (0.5, 1.5)
 FINE = 1.5
 LOOSE_TIME_LEVEL = 0.5  # one level looser than FINE
-ROOT_RTOL = 1e-5        # root tolerance 2e-6 on ln H: far below the errors measured here
 
 
 def resolution(mesh_level, time_level):
     """Resolution with ``mesh_level``'s mesh and ``time_level``'s step tolerance, the melting
-    width 1 K and the default search's spread."""
-    cells, fraction, _ = level_resolution(mesh_level)
-    _, _, tol = level_resolution(time_level)
-    return Resolution(int(cells), float(fraction), float(tol), MELT_WIDTH, MELT_SPREAD)
-
-
-def height(scene, mesh_level, time_level):
-    """Critical height [m] with a fixed resolution and a tight root (nan when censored)."""
-    model = build_model(scene, resolution(mesh_level, time_level))
-    res = critical_height(scene, rtol=ROOT_RTOL, model=model)
-    return math.nan if res.censored else res.critical_height
+    width 1 K and the default search's spread (cost_breakdown.py's, with the spread)."""
+    return split_resolution(mesh_level, time_level=time_level, melt_width=MELT_WIDTH,
+                            melt_spread=MELT_SPREAD)
 
 
 def newton_iterations(scene, mesh_level, time_level, h):
@@ -85,10 +75,10 @@ def measure(label, scene):
     """One scene's rows: per level (total, space, time), and the looser-time variant."""
     heights = {}
 
-    def h(mesh_level, time_level):   # each resolution searched once
+    def h(mesh_level, time_level):   # each resolution searched once (tight root)
         key = (mesh_level, time_level)
         if key not in heights:
-            heights[key] = height(scene, mesh_level, time_level)
+            heights[key] = height(scene, resolution(mesh_level, time_level))
         return heights[key]
 
     ref = h(REFERENCE_LEVEL, REFERENCE_LEVEL)
