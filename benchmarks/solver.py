@@ -59,7 +59,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 import peer  # noqa: E402
 
 from skidmc.scene import get_preset, make_scene  # noqa: E402
-from skidmc.scene.validation import off_preset_scenes as box_scenes  # noqa: E402
+from skidmc.scene.validation import off_preset_overrides as box_overrides  # noqa: E402
 from skidmc.solver import FT, critical_height  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
@@ -72,18 +72,25 @@ PEER_SETTINGS = [(1e-3, 40), (1e-4, 80), (1e-5, 160)]
 REFERENCE_RTOL = 3e-5
 #: rtol values summarised per scene set (the issue's three).
 SUMMARY_RTOLS = [1e-2, 3e-3, 1e-3]
-def off_preset_scenes(n=16, seed=16):
-    """(label, scene) of the issue-16 box around paper-quartz
-    (:func:`skidmc.scene.validation.off_preset_scenes`), and E/R = 15,000 K twice: with the rate
-    at 575 K kept (as paper-series1 samples it) and with the report's prefactor (a self-heating
-    billet)."""
-    out = box_scenes(n, seed)
+def off_preset_overrides(n=16, seed=16):
+    """(label, overrides) of the off-preset scenes, each for ``make_scene(preset="paper-quartz",
+    **overrides)``: the issue-16 box around paper-quartz
+    (:func:`skidmc.scene.validation.off_preset_overrides`), and E/R = 15,000 K twice: with the
+    rate at 575 K kept (as paper-series1 samples it) and with the report's prefactor (a
+    self-heating billet). Plain dicts, so that ``tolerance_price.py`` can build the same scenes
+    in an older tree."""
+    out = box_overrides(n, seed)
     rate_575 = 5e19 * math.exp(-26300.0 / 575.0 + 15000.0 / 575.0)
-    out.append(("Ta15000-series1", make_scene(preset="paper-quartz", **{
-        "kinetics.activation_temperature": 15000.0, "kinetics.prefactor": rate_575})))
-    out.append(("Ta15000-self-heating", make_scene(preset="paper-quartz", **{
-        "kinetics.activation_temperature": 15000.0})))
+    out.append(("Ta15000-series1", {"kinetics.activation_temperature": 15000.0,
+                                    "kinetics.prefactor": rate_575}))
+    out.append(("Ta15000-self-heating", {"kinetics.activation_temperature": 15000.0}))
     return out
+
+
+def off_preset_scenes(n=16, seed=16):
+    """(label, scene) of :func:`off_preset_overrides`."""
+    return [(label, make_scene(preset="paper-quartz", **overrides))
+            for label, overrides in off_preset_overrides(n, seed)]
 
 
 def _fast_tier_available() -> bool:

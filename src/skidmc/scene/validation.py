@@ -15,7 +15,7 @@ import numpy as np
 
 from skidmc.scene.scenes import make_scene
 
-__all__ = ["OFF_PRESET_TARGETS", "off_preset_scenes"]
+__all__ = ["OFF_PRESET_TARGETS", "off_preset_overrides", "off_preset_scenes"]
 
 #: Targets of the off-preset scenes (SI): quartz, an alumina grade, mild steel, and one in
 #: between (k [W/(m K)], rho [kg/m^3], c [J/(kg K)]).
@@ -33,10 +33,13 @@ _KSI = 6.894757e6     # [Pa]
 _POUND = 0.45359237   # [kg]
 
 
-def off_preset_scenes(n=16, seed=16):
-    """``n`` (label, scene) pairs drawn from the off-preset box (paper-quartz's HE and kinetics).
+def off_preset_overrides(n=16, seed=16):
+    """``n`` (label, overrides) pairs of the off-preset box, for ``make_scene(preset=
+    "paper-quartz", **overrides)`` (SI values with the keys :func:`make_scene` takes).
 
-    Deterministic for a given ``seed``; the first ``m`` scenes of ``n >= m`` are those of ``m``.
+    Deterministic for a given ``seed``; the first ``m`` pairs of ``n >= m`` are those of ``m``.
+    Plain dicts, so that another version of skidmc (a benchmark's older tree) can build the
+    same scenes.
     """
     rng = np.random.default_rng(seed)
     out = []
@@ -49,6 +52,15 @@ def off_preset_scenes(n=16, seed=16):
                      "flow_stress": float(rng.uniform(15.0, 45.0) * _KSI),
                      "billet_mass": float(rng.uniform(5.0, 40.0) * _POUND),
                      "angle": angle, "tilt": angle if vertical else 0.0}
-        out.append((f"{target}-{'vertical' if vertical else 'pendulum'}-{i}",
-                    make_scene(preset="paper-quartz", **overrides)))
+        out.append((f"{target}-{'vertical' if vertical else 'pendulum'}-{i}", overrides))
     return out
+
+
+def off_preset_scenes(n=16, seed=16):
+    """``n`` (label, scene) pairs drawn from the off-preset box (paper-quartz's HE and kinetics):
+    the scenes of :func:`off_preset_overrides`.
+
+    Deterministic for a given ``seed``; the first ``m`` scenes of ``n >= m`` are those of ``m``.
+    """
+    return [(label, make_scene(preset="paper-quartz", **overrides))
+            for label, overrides in off_preset_overrides(n, seed)]
