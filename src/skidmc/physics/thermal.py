@@ -131,7 +131,16 @@ MELT_SPREAD = 1.0
 _SETTLED_Z = 12.0
 
 
-@njit(cache=True, inline="always")
+#: Compilation options of this module's kernels. ``error_model="numpy"``: a division by zero
+#: gives inf or nan (which the integrator's finiteness checks reject) instead of a Python
+#: exception, so no division carries a zero test. ``fastmath={"contract"}``: LLVM may fuse a
+#: multiply and an add into one fused multiply-add (one rounding instead of two; no other
+#: fast-math assumption, so the inf and nan checks stay exact). Together 1.15x faster per
+#: simulation, measured side by side (docs/model.md, "Compiled kernels").
+_JIT = dict(cache=True, error_model="numpy", fastmath={"contract"})
+
+
+@njit(**_JIT, inline="always")
 def _flux(t, q0, s, c, w, t_exit, q_ext):
     """Frictional flux q(t) [W/m^2]: q0 (s - c (1 - cos w t)) on [0, t_exit), then q_ext."""
     if t < t_exit:
@@ -140,7 +149,7 @@ def _flux(t, q0, s, c, w, t_exit, q_ext):
     return q_ext
 
 
-@njit(cache=True, inline="always")
+@njit(**_JIT, inline="always")
 def _he_enthalpy(temperature, rho_c, latent_v, melting_point, melt_width):
     """Volumetric enthalpy h [J/m^3] of an HE cell and its derivative dh/dT [J/(m^3 K)].
 
@@ -167,7 +176,7 @@ def _he_enthalpy(temperature, rho_c, latent_v, melting_point, melt_width):
             rho_c + 2.0 * latent_v * e * inv * inv * inv_width)
 
 
-@njit(cache=True, inline="always")
+@njit(**_JIT, inline="always")
 def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_point, melt_width,
                       melt_spread):
     """Enthalpy [J/m^3] of HE cell ``i`` with its melting spread over the cell's own range.
@@ -219,7 +228,7 @@ def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_poin
     return h, dh, -d_up, d_up
 
 
-@njit(cache=True, inline="always")
+@njit(**_JIT, inline="always")
 def _local_error(i, temp_new, temp, temp_prev, temp_prev2, dt, inv_dt1, inv_dt0, c2):
     """BDF2's local error estimate [K] in cell ``i``: the corrector ``temp_new`` minus the
     quadratic extrapolation through the last three accepted temperatures (Newton divided
@@ -231,7 +240,7 @@ def _local_error(i, temp_new, temp, temp_prev, temp_prev2, dt, inv_dt1, inv_dt0,
     return abs(temp_new[i] - pred) * _BDF2_ERROR_CONSTANT
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def runaway_temperature(prefactor, activation_temperature, adiabatic_rise, time_scale,
                         fraction):
     """Temperature [K] at which the adiabatic induction time equals ``fraction * time_scale``.
@@ -257,14 +266,14 @@ def runaway_temperature(prefactor, activation_temperature, adiabatic_rise, time_
     return 0.5 * (lo + hi)
 
 
-@njit(cache=True)
+@njit(**_JIT)
 def adiabatic_induction_time(temperature, prefactor, activation_temperature, adiabatic_rise):
     """Frank-Kamenetskii adiabatic induction time [s] at ``temperature`` [K]."""
     return temperature**2 / (activation_temperature * adiabatic_rise * prefactor
                              * math.exp(-activation_temperature / temperature))
 
 
-@njit(cache=True, nogil=True)
+@njit(**_JIT, nogil=True)
 def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                     he_density, latent_heat, melting_point, melt_width, melt_spread,
                     prefactor, activation_temperature, heat_of_reaction,
@@ -344,7 +353,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
     return info
 
 
-@njit(cache=True, nogil=True)
+@njit(**_JIT, nogil=True)
 def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                   he_density, latent_heat, melting_point, melt_width, melt_spread,
                   prefactor, activation_temperature, heat_of_reaction,
