@@ -43,8 +43,6 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -54,6 +52,7 @@ import skidmc.physics.thermal as thermal  # noqa: E402
 from skidmc.physics.thermal import INFO_STEPS, INFO_T_EVENT  # noqa: E402
 from skidmc.scene import get_preset  # noqa: E402
 from skidmc.solver import build_model, critical_height  # noqa: E402
+from skidmc.solver.simulate import kernel_arguments  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
 #: The variants' ``_JIT`` lines (``cache=False``: each is compiled afresh in this process).
@@ -82,21 +81,6 @@ def compile_variants(directory):
         spec.loader.exec_module(module)
         modules[name] = module
     return modules
-
-
-def kernel_arguments(model, height):
-    """``simulate_kernel``'s arguments for ``model`` at ``height`` [m], as ``simulate`` passes
-    them (full run, nothing recorded)."""
-    q0 = model.flux_amplitude(height)
-    none = np.zeros(0)
-    r = model.resolution
-    return (model.width, model.rho_c, model.face_conductance, model.n_target, model.q_share_he,
-            model.he_density, model.latent_heat, model.melting_point, r.melt_width,
-            r.melt_spread, model.prefactor, model.activation_temperature,
-            model.heat_of_reaction, q0, model.slide_s, model.slide_c, model.omega,
-            model.exit_time, q0 * model.extension_flux_factor, model.end_time, model.end_time,
-            model.initial_temperature, r.tol_temperature, model.dt_initial,
-            model.runaway_fraction, 100_000, none, none)
 
 
 def kernel_rows(modules, scenes, calls):

@@ -21,7 +21,7 @@ from skidmc.physics.thermal import (
     simulate_kernel,
 )
 
-__all__ = ["MAX_STEPS", "Simulation", "SolverError", "simulate"]
+__all__ = ["MAX_STEPS", "Simulation", "SolverError", "kernel_arguments", "simulate"]
 
 MAX_STEPS = 200_000
 
@@ -49,6 +49,29 @@ class Simulation:
     interface_temperature: np.ndarray | None = None  # [K]
 
 
+def kernel_arguments(model, height, *, max_steps=MAX_STEPS, flux_override=None,
+                     until_exit=False, record_t=None, record_tb=None):
+    """The arguments of :func:`skidmc.physics.thermal.simulate_kernel` for ``model`` at
+    ``height`` [m], in its order (see :func:`simulate` for the keywords; ``record_t``,
+    ``record_tb``: the recording arrays, empty when None)."""
+    if flux_override is None:
+        q0 = model.flux_amplitude(height)
+        flux = (q0, model.slide_s, model.slide_c, model.omega, model.exit_time,
+                q0 * model.extension_flux_factor)
+    else:
+        flux = tuple(float(v) for v in flux_override)
+    if record_t is None:
+        record_t = record_tb = np.zeros(0)
+    return (model.width, model.rho_c, model.face_conductance, model.n_target, model.q_share_he,
+            model.he_density, model.latent_heat, model.melting_point,
+            model.resolution.melt_width, model.resolution.melt_spread,
+            model.prefactor, model.activation_temperature, model.heat_of_reaction,
+            flux[0], flux[1], flux[2], flux[3], flux[4], flux[5], model.end_time,
+            min(flux[4], model.end_time) if until_exit else model.end_time,
+            model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
+            model.runaway_fraction, max_steps, record_t, record_tb)
+
+
 def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=None,
              until_exit=False):
     """Simulate the impact from drop height ``height`` [m].
@@ -73,24 +96,13 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
     -------
     Simulation
     """
-    if flux_override is None:
-        q0 = model.flux_amplitude(height)
-        flux = (q0, model.slide_s, model.slide_c, model.omega, model.exit_time,
-                q0 * model.extension_flux_factor)
-    else:
-        flux = tuple(float(v) for v in flux_override)
     n_rec = max_steps if record else 0
     rec_t = np.zeros(min(n_rec, 100_000))
     rec_tb = np.zeros_like(rec_t)
-    info = simulate_kernel(
-        model.width, model.rho_c, model.face_conductance, model.n_target, model.q_share_he,
-        model.he_density, model.latent_heat, model.melting_point, model.resolution.melt_width,
-        model.resolution.melt_spread,
-        model.prefactor, model.activation_temperature, model.heat_of_reaction,
-        flux[0], flux[1], flux[2], flux[3], flux[4], flux[5], model.end_time,
-        min(flux[4], model.end_time) if until_exit else model.end_time,
-        model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
-        model.runaway_fraction, max_steps, rec_t, rec_tb)
+    info = simulate_kernel(*kernel_arguments(model, height, max_steps=max_steps,
+                                             flux_override=flux_override,
+                                             until_exit=until_exit, record_t=rec_t,
+                                             record_tb=rec_tb))
     if info[INFO_FAILED] or (info[INFO_STEPS] + info[INFO_REJECTED] >= max_steps
                              and not info[INFO_EVENT]):
         raise SolverError(
