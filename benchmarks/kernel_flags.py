@@ -21,7 +21,7 @@ off-preset scenes with ``skidmc.solver.simulate``'s kernel swapped between ``pyt
 ``shipped`` (alternated, best of 3, three rounds): the ratio per height, and the largest
 relative change of the height.
 
-Writes results/benchmarks/kernel_flags.md. Run: ``python benchmarks/kernel_flags.py`` (~3 min).
+Writes results/benchmarks/kernel_flags.md. Run: ``python benchmarks/kernel_flags.py`` (~30 s).
 """
 
 from __future__ import annotations

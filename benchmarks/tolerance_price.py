@@ -23,7 +23,7 @@ Usage::
 
 Each older tree is ``PATH`` or ``PATH=LABEL`` (the label names it in the table, e.g. its commit).
 
-Writes ``results/benchmarks/tolerance_price.md``; ~2 minutes with one older tree (its first
+Writes ``results/benchmarks/tolerance_price.md``; ~1 minute with one older tree (its first
 round compiles its kernels, not timed).
 """
 
