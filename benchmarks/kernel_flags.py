@@ -47,6 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from solver import PRESETS, off_preset_scenes  # noqa: E402
+from timing import best_time  # noqa: E402
 
 import skidmc.physics.thermal as thermal  # noqa: E402
 from skidmc.physics.thermal import INFO_STEPS, INFO_T_EVENT  # noqa: E402
@@ -124,12 +125,7 @@ def search_rows(modules, scenes, rounds, calls):
 
     def timed(scene, name):
         simulate_module.simulate_kernel = modules[name].simulate_kernel
-        best, res = math.inf, None
-        for _ in range(calls):
-            t0 = time.perf_counter()
-            res = critical_height(scene, rtol=1e-3)
-            best = min(best, time.perf_counter() - t0)
-        return best, res
+        return best_time(lambda: critical_height(scene, rtol=1e-3), calls)
 
     out = {label: dict(ratios=[], change=0.0, simulations=None) for label, _ in scenes}
     try:

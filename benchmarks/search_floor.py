@@ -42,13 +42,13 @@ import math  # noqa: E402
 import platform  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from solver import PRESETS, off_preset_scenes  # noqa: E402
+from timing import median_time  # noqa: E402
 
 from skidmc.physics.thermal import MELT_SPREAD  # noqa: E402
 from skidmc.scene import get_preset  # noqa: E402
@@ -65,19 +65,10 @@ TARGET = 2e-3
 LEAST_BRACKET = 2e-4
 
 
-def _median_time(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), out
-
-
 def measure(label, scene, rtol, repeats):
     """One row: the default search's cost against one simulation per level of its pair."""
     critical_height(scene, rtol=rtol)   # compile and warm the caches
-    t_height, res = _median_time(lambda: critical_height(scene, rtol=rtol), repeats)
+    t_height, res = median_time(lambda: critical_height(scene, rtol=rtol), repeats)
     by_signs = _exit_regime(scene) != "steady"
     row = dict(scene=label, rtol=rtol, level=res.level, simulations=res.evaluations,
                height_ms=1e3 * t_height, censored=res.censored, by_signs=by_signs)
@@ -91,13 +82,13 @@ def measure(label, scene, rtol, repeats):
     for key, level in (("coarse_ms", res.level - 1.0), ("fine_ms", res.level)):
         model = build_model(scene, level=level, melt_width=width, melt_spread=MELT_SPREAD)
         simulate(model, res.critical_height)
-        t_sim, _ = _median_time(lambda m=model: simulate(m, res.critical_height), repeats)
+        t_sim, _ = median_time(lambda m=model: simulate(m, res.critical_height), repeats)
         row[key] = 1e3 * t_sim
         if by_signs:
             for side in (-1.0, 1.0):
                 h = level_roots[level] * math.exp(side * LEAST_BRACKET)
                 simulate(model, h, until_exit=True)
-                t_sim, _ = _median_time(
+                t_sim, _ = median_time(
                     lambda m=model, h=h: simulate(m, h, until_exit=True), repeats)
                 least += 1e3 * t_sim
     row["floor_ms"] = row["coarse_ms"] + row["fine_ms"]

@@ -57,6 +57,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import peer  # noqa: E402
+from timing import median_time  # noqa: E402
 
 from skidmc.scene import get_preset, make_scene  # noqa: E402
 from skidmc.scene.validation import off_preset_overrides as box_overrides  # noqa: E402
@@ -103,12 +104,8 @@ def _fast_tier_available() -> bool:
 
 def _time_skidmc(scene, repeats, **kwargs):
     """(result, median wall time [s]) over ``repeats`` calls (compiled beforehand)."""
-    times, res = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        res = critical_height(scene, **kwargs)
-        times.append(time.perf_counter() - t0)
-    return res, statistics.median(times)
+    seconds, res = median_time(lambda: critical_height(scene, **kwargs), repeats)
+    return res, seconds
 
 
 def run(presets, rtols, peer_settings, repeats, fast_repeats, off_preset=()):

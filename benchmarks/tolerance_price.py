@@ -41,7 +41,6 @@ import json  # noqa: E402
 import statistics  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
-import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,6 +56,8 @@ def _worker(spec):
     Imports only what every skidmc since the layout issue has (``make_scene``, ``get_preset``,
     ``critical_height``), so that an older tree can run it. Returns one row per (rtol, scene).
     """
+    from timing import median_time
+
     from skidmc.scene import get_preset, make_scene
     from skidmc.solver import critical_height
 
@@ -70,13 +71,10 @@ def _worker(spec):
     rows = []
     for rtol in spec["rtols"]:
         for label, kind, scene in scenes:
-            times = []
-            for _ in range(spec["repeats"]):
-                t0 = time.perf_counter()
-                res = critical_height(scene, rtol=rtol)
-                times.append(time.perf_counter() - t0)
+            seconds, res = median_time(lambda s=scene, r=rtol: critical_height(s, rtol=r),
+                                       spec["repeats"])
             rows.append(dict(rtol=rtol, scene=label, kind=kind,
-                             time_s=statistics.median(times), evaluations=res.evaluations,
+                             time_s=seconds, evaluations=res.evaluations,
                              height_m=res.critical_height,
                              exit_kind=getattr(res, "exit_kind", "")))
     return rows
