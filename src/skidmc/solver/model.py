@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from skidmc.errors import SceneError
 from skidmc.physics import mechanics
 from skidmc.physics.meshes import fill_meshes, geometric_ratio, reaction_zone
 from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION, runaway_temperature
@@ -280,6 +281,10 @@ class SkidModel:
     billet_diameter: float = math.nan  # D [m]
     indent_per_root_height: float = 0.0  # X_max / sqrt(H) = sqrt(2 g) cos(phi) / omega [m^0.5]
     slide_per_root_height: float = 0.0   # sliding distance / sqrt(H) while heating [m^0.5]
+    # The exact target (``build_model(..., target="exact")``; n_target = 0): its effusivity
+    # sqrt(k rho c) [W s^0.5 / (m^2 K)] and the HE's conductivity k [W/(m K)]; 0 when meshed.
+    target_effusivity: float = 0.0
+    he_conductivity: float = 0.0
 
     def flux_amplitude(self, height):
         """q0 = mu sigma V0 [W/m^2] for drop height ``height`` [m] (Eqs. 1, 10)."""
@@ -307,7 +312,7 @@ class SkidModel:
 
 def build_model(scene, resolution=None, *, level=0.0, melting=True,
                 runaway_fraction=DEFAULT_RUNAWAY_FRACTION, horizon=HORIZON_EXIT_TIMES,
-                meshes=True, melt_width=None, melt_spread=0.0):
+                meshes=True, melt_width=None, melt_spread=0.0, target="mesh"):
     """Infer the model a scene needs and build its meshes.
 
     Parameters
@@ -334,11 +339,19 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     meshes : bool
         Build the meshes. Without them (empty arrays) the model still carries the mechanics,
         terms and validity flags, e.g. for the fast tier's results.
+    target : {"mesh", "exact"}
+        "mesh": the target on its own finite-volume mesh (what the search uses). "exact": the
+        target as the exact semi-infinite solid of Eq. (12), through Duhamel's integral at the
+        interface (:mod:`skidmc.physics.thermal`); only the HE is meshed. The target's mesh
+        carries most of a level's spatial error (docs/model.md, "The target as an exact
+        semi-infinite solid"); the search's error model is not yet calibrated for it.
 
     Returns
     -------
     SkidModel
     """
+    if target not in ("mesh", "exact"):
+        raise SceneError("target", target, 'must be "mesh" or "exact"')
     if resolution is None:
         resolution = resolution_for_level(level, melt_width, melt_spread)
     sigma = scene.flow_stress
@@ -397,6 +410,15 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         # (the fast tier builds a mesh-less model for every result).
         n_cells = 0
         width, rho_c, face, q_share_he = np.empty(0), np.empty(0), np.empty(0), math.nan
+    target_effusivity = he_conductivity = 0.0
+    if target == "exact":
+        # The HE's cells and faces alone (the same HE mesh as the meshed target's); the
+        # target enters through Duhamel's integral.
+        width, rho_c, face = width[n_cells:].copy(), rho_c[n_cells:].copy(), face[n_cells:].copy()
+        n_cells, q_share_he = 0, math.nan
+        target_effusivity = math.sqrt(scene.target_conductivity * scene.target_density
+                                      * scene.target_heat_capacity)
+        he_conductivity = scene.he_conductivity
 
     return SkidModel(
         omega=omega, contact_time=t_c, exit_time=t_exit, exit_kind=exit_kind,
@@ -413,6 +435,7 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         ignition_temperature=t_ign, rest_time=rest_time, billet_diameter=diameter,
         indent_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * math.cos(phi) / omega,
         slide_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * mean_shape * t_exit,
+        target_effusivity=target_effusivity, he_conductivity=he_conductivity,
     )
 
 

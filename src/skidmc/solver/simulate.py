@@ -69,7 +69,8 @@ def kernel_arguments(model, height, *, max_steps=MAX_STEPS, flux_override=None,
             flux[0], flux[1], flux[2], flux[3], flux[4], flux[5], model.end_time,
             min(flux[4], model.end_time) if until_exit else model.end_time,
             model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
-            model.runaway_fraction, max_steps, record_t, record_tb)
+            model.runaway_fraction, max_steps, record_t, record_tb,
+            model.target_effusivity, model.he_conductivity)
 
 
 def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=None,
