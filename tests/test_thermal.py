@@ -48,12 +48,13 @@ def test_constant_flux_surface_temperature(name):
     assert rel.max() < 2e-3
 
 
-def test_time_varying_flux_duhamel():
-    """Surface temperature under the report's q(t) against Duhamel's integral.
-
-    For two semi-infinite media, T_b(t) - T0 = (1/(sqrt(pi) (e1+e2))) int_0^t q(s)/sqrt(t-s) ds.
-    """
-    scene, model = inert_model("paper-alumina-smooth", level=2)
+def _time_varying_flux_error(target):
+    """Worst relative error of the surface temperature rise under the report's q(t) over
+    0.1-1 t_exit against Duhamel's integral for two semi-infinite media,
+    T_b(t) - T0 = (1/(sqrt(pi) (e1+e2))) int_0^t q(s)/sqrt(t-s) ds (inert HE, level 2)."""
+    scene = get_preset("paper-alumina-smooth")
+    model = dataclasses.replace(build_model(scene, level=2, target=target), prefactor=0.0,
+                                latent_heat=0.0)
     e_sum = (effusivity(scene.he_conductivity, scene.he_density, scene.he_heat_capacity)
              + effusivity(scene.target_conductivity, scene.target_density,
                           scene.target_heat_capacity))
@@ -64,16 +65,21 @@ def test_time_varying_flux_duhamel():
     def flux(s):
         return q0 * max(model.slide_s - model.slide_c * (1 - math.cos(model.omega * s)), 0.0)
 
-    checked = 0
+    errors = []
     for t, tb in zip(sim.times, sim.interface_temperature):
-        if t < 0.1 * model.exit_time or t > model.exit_time:
-            continue
-        integral, _ = quad(flux, 0.0, t, weight="alg", wvar=(0.0, -0.5), epsabs=0, epsrel=1e-10)
-        exact = model.initial_temperature + integral / (math.sqrt(math.pi) * e_sum)
-        # Same justification as the constant-flux test.
-        assert tb == pytest.approx(exact, rel=2e-3 * (exact - model.initial_temperature) / exact)
-        checked += 1
-    assert checked > 10
+        if 0.1 * model.exit_time <= t <= model.exit_time:
+            integral, _ = quad(flux, 0.0, t, weight="alg", wvar=(0.0, -0.5), epsabs=0,
+                               epsrel=1e-10)
+            rise = integral / (math.sqrt(math.pi) * e_sum)
+            errors.append(abs(tb - model.initial_temperature - rise) / rise)
+    assert len(errors) > 10
+    return max(errors)
+
+
+def test_time_varying_flux_duhamel():
+    """Surface temperature under the report's q(t) against Duhamel's integral."""
+    # Same justification as the constant-flux test (measured 4.1e-4).
+    assert _time_varying_flux_error("mesh") < 2e-3
 
 
 def test_geometric_widths_sum_and_ratio():
@@ -127,29 +133,9 @@ def test_exact_target_constant_flux(name):
 
 def test_exact_target_time_varying_flux():
     """The exact target under the report's q(t) against Duhamel's integral (two media)."""
-    scene = get_preset("paper-alumina-smooth")
-    model = dataclasses.replace(build_model(scene, level=2, target="exact"), prefactor=0.0,
-                                latent_heat=0.0)
-    e_sum = (effusivity(scene.he_conductivity, scene.he_density, scene.he_heat_capacity)
-             + effusivity(scene.target_conductivity, scene.target_density,
-                          scene.target_heat_capacity))
-    height = 7.0
-    sim = simulate(model, height, record=True)
-    q0 = model.flux_amplitude(height)
-
-    def flux(s):
-        return q0 * max(model.slide_s - model.slide_c * (1 - math.cos(model.omega * s)), 0.0)
-
-    worst = 0.0
-    for t, tb in zip(sim.times, sim.interface_temperature):
-        if 0.1 * model.exit_time <= t <= model.exit_time:
-            integral, _ = quad(flux, 0.0, t, weight="alg", wvar=(0.0, -0.5), epsabs=0,
-                               epsrel=1e-10)
-            rise = integral / (math.sqrt(math.pi) * e_sum)
-            worst = max(worst, abs(tb - model.initial_temperature - rise) / rise)
     # Measured 2.3e-4 (the meshed target at the same level: 4.1e-4); 3e-4 leaves 30 % for
     # other machines' rounding, and a lost factor or a wrong effusivity is percent-sized.
-    assert 0.0 < worst < 3e-4
+    assert 0.0 < _time_varying_flux_error("exact") < 3e-4
 
 
 @pytest.mark.parametrize("name,guess", [("paper-gold", 167.8), ("paper-quartz", 0.3706)])
