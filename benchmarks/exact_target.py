@@ -125,8 +125,11 @@ def main(argv=None):
     write(rows, ratios, time.time() - started)
 
 
-def _median(values):
-    return statistics.median(values)
+def _by_regime(items, regime_of):
+    """(name, items) of the steady scenes and of the sign-located ones (those present)."""
+    groups = (("steady", [x for x in items if regime_of(x) == "steady"]),
+              ("sign-located", [x for x in items if regime_of(x) != "steady"]))
+    return [(name, sel) for name, sel in groups if sel]
 
 
 def write(rows, ratios, seconds):
@@ -149,13 +152,9 @@ def write(rows, ratios, seconds):
               "| regime | scenes | " + " | ".join(f"mesh L{lv:g}" for lv in LEVELS) + " | "
               + " | ".join(f"exact L{lv:g}" for lv in LEVELS) + " |",
               "|---|---|" + "---|" * (2 * len(LEVELS))]
-    for regime, pick in (("steady", lambda r: r["regime"] == "steady"),
-                         ("sign-located", lambda r: r["regime"] != "steady")):
-        sel = [r for r in rows if pick(r)]
-        if not sel:
-            continue
+    for regime, sel in _by_regime(rows, lambda r: r["regime"]):
         lines.append(f"| {regime} | {len(sel)} | "
-                     + " | ".join(f"{_median([abs(r[t][lv]) for r in sel]):.2e}"
+                     + " | ".join(f"{statistics.median([abs(r[t][lv]) for r in sel]):.2e}"
                                   for t in TARGETS for lv in LEVELS) + " |")
     lines += ["", "## Richardson pairs", "",
               "Error of the extrapolated value R and the pair's correction |c|; "
@@ -170,31 +169,25 @@ def write(rows, ratios, seconds):
               "|---|---|---|---|---|---|"]
     for t in TARGETS:
         for p in PAIRS:
-            for regime, pick in (("steady", lambda r: r["regime"] == "steady"),
-                                 ("sign-located", lambda r: r["regime"] != "steady")):
-                sel = [r for r in rows if pick(r)]
-                if not sel:
-                    continue
+            for regime, sel in _by_regime(rows, lambda r: r["regime"]):
                 errs = [abs(r[t][p][0]) for r in sel]
                 res = [abs(r[t][p][0]) / abs(r[t][p][1]) for r in sel]
-                lines.append(f"| {t} ({p[0]:g}, {p[1]:g}) | {regime} | {_median(errs):.1e} | "
-                             f"{max(errs):.1e} | {_median(res):.2f} | {max(res):.2f} |")
+                lines.append(f"| {t} ({p[0]:g}, {p[1]:g}) | {regime} | "
+                             f"{statistics.median(errs):.1e} | {max(errs):.1e} | "
+                             f"{statistics.median(res):.2f} | {max(res):.2f} |")
     lines += ["", "## Cost per simulation", "",
               f"Kernel wall time at 0.99 and 1.01 H_c (best of {TIMING_REPEATS}, alternated), "
               "summed, over the meshed target's level 0.5 on the same scene; median [min-max] "
               "over the scenes.", "",
               "| regime | " + " | ".join(f"{t} L{lv:g}" for t in TARGETS for lv in LEVELS) + " |",
               "|---|" + "---|" * (len(TARGETS) * len(LEVELS))]
-    for regime, pick in (("steady", lambda x: x[1] == "steady"),
-                         ("sign-located", lambda x: x[1] != "steady"), ("all", lambda x: True)):
-        sel = [x[2] for x in ratios if pick(x)]
-        if not sel:
-            continue
+    for regime, sel in _by_regime(ratios, lambda x: x[1]) + [("all", ratios)]:
+        sel = [x[2] for x in sel]
         cells = []
         for t in TARGETS:
             for lv in LEVELS:
                 vals = [x[(t, lv)] for x in sel]
-                cells.append(f"{_median(vals):.2f} [{min(vals):.2f}-{max(vals):.2f}]")
+                cells.append(f"{statistics.median(vals):.2f} [{min(vals):.2f}-{max(vals):.2f}]")
         lines.append(f"| {regime} | " + " | ".join(cells) + " |")
     lines += ["", f"Wall time of this run: {seconds:.0f} s."]
     OUT.mkdir(parents=True, exist_ok=True)
