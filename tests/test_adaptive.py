@@ -13,6 +13,7 @@ import math
 import pytest
 from test_extremes import _rate_at_ref
 
+from skidmc.errors import SceneError
 from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.scene import get_preset, make_scene
 from skidmc.solver import critical_height
@@ -40,13 +41,15 @@ def test_pair_root_tolerance_is_the_room_left_or_the_root_share(rtol):
     assert x_tol < rtol
 
 
-@pytest.mark.parametrize("spread", [0.0, MELT_SPREAD])
+@pytest.mark.parametrize(("spread", "exact"), [(0.0, False), (MELT_SPREAD, False),
+                                               (MELT_SPREAD, True)])
 @pytest.mark.parametrize("rtol", [3e-2, 1e-2, 3e-3, 1e-3, 1e-4])
-def test_jump_root_tolerances_spend_the_room_split_as_measured(rtol, spread):
-    level = first_pair_level(rtol)
+def test_jump_root_tolerances_spend_the_room_split_as_measured(rtol, spread, exact):
+    level = first_pair_level(rtol, exact, exact)
     width = melt_width_for_rtol(rtol, level)
-    coarse, fine = jump_root_tolerances(rtol, level, width, spread)
-    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0, spread)
+    coarse, fine = jump_root_tolerances(rtol, level, width, spread, exact)
+    predicted = (a_posteriori_error(predicted_correction(level, exact, exact), level - 1.0,
+                                    spread, exact, exact)
                  + MELT_WIDTH_BIAS_PER_K * width)
     room = max(ROOT_SHARE * rtol, rtol - predicted)
     # The Richardson value's root error (4 fine + coarse) / 3 fills the room the pair is likely
@@ -58,6 +61,39 @@ def test_jump_root_tolerances_spend_the_room_split_as_measured(rtol, spread):
         assert coarse == pytest.approx(JUMP_COARSE_SHARE * room)
         assert coarse == pytest.approx(2.0 * fine)
         assert (4.0 * fine + coarse) / 3.0 == pytest.approx(room)
+
+
+@pytest.mark.parametrize("signs", [False, True])
+@pytest.mark.parametrize("rtol", [3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4])
+def test_the_exact_targets_first_pair_leaves_the_root_finder_its_share(rtol, signs):
+    # The lowest level whose predicted estimate and melting bias leave ROOT_SHARE rtol to the
+    # roots; the level below it would not (from RICHARDSON_MIN_LEVEL up).
+    def predicted(level):
+        return (a_posteriori_error(predicted_correction(level, True, signs), level - 1.0,
+                                   MELT_SPREAD, True, signs)
+                + MELT_WIDTH_BIAS_PER_K * melt_width_for_rtol(rtol, level))
+
+    level = first_pair_level(rtol, True, signs)
+    assert level >= 1.0 and (2.0 * level) % 1.0 == 0.0
+    assert predicted(level) <= (1.0 - ROOT_SHARE) * rtol or level == 4.0
+    if level > 1.0:
+        assert predicted(level - 0.5) > (1.0 - ROOT_SHARE) * rtol
+    assert {1e-2: 1.0, 3e-3: 1.0, 1e-3: 1.5}.get(rtol, level) == level
+
+
+@pytest.mark.parametrize("correction", [0.0, 5e-5, 2e-4, 1e-3])
+@pytest.mark.parametrize("coarse_level", [0.0, 0.5, 1.0, 1.5, 2.5])
+def test_the_exact_targets_estimate(correction, coarse_level):
+    # Steady rebounds: a multiple of the pair's own correction (0.75, or 1 from level 1.5 up).
+    # Located by signs: twice the correction (the residual of any order >= 1 with errors of one
+    # sign), never below the measured floor 4e-4 3^-(L - 1) where the correction cancels.
+    steady = a_posteriori_error(-correction, coarse_level, MELT_SPREAD, True, False)
+    assert steady == pytest.approx((0.75 if coarse_level < 1.5 else 1.0) * correction)
+    signs = a_posteriori_error(-correction, coarse_level, MELT_SPREAD, True, True)
+    assert signs == pytest.approx(max(2.0 * correction, 4e-4 * 3.0 ** -coarse_level))
+    # The meshed target's estimate is unchanged by the new arguments' defaults.
+    assert a_posteriori_error(correction, coarse_level, MELT_SPREAD) == a_posteriori_error(
+        correction, coarse_level, MELT_SPREAD, False, True)
 
 
 @pytest.mark.parametrize("rtol", [1e-2, 3e-3, 1e-3])
@@ -106,3 +142,26 @@ def test_a_melting_bias_above_its_share_narrows_the_width():
     ref = critical_height(scene, rtol=3e-4)
     assert abs(res.critical_height / ref.critical_height - 1.0) <= 3e-3 + ref.error_estimate
     assert abs(res.critical_height / ref.critical_height - 1.0) <= res.error_estimate
+
+
+def test_the_default_search_models_the_target_as_the_exact_solid():
+    # The default (adaptive) search uses target="exact"; a fixed plan keeps the meshed target
+    # its calibrated level model was fitted on. Both are deterministic, so equality is exact.
+    scene = get_preset("paper-gold")
+    default = critical_height(scene, rtol=3e-3)
+    assert default.critical_height == critical_height(scene, rtol=3e-3,
+                                                      target="exact").critical_height
+    meshed = critical_height(scene, rtol=3e-3, target="mesh")
+    assert meshed.critical_height != default.critical_height
+    # The two agree within their estimates (both bound their distance to the converged model).
+    assert abs(meshed.critical_height / default.critical_height - 1.0) <= (
+        meshed.error_estimate + default.error_estimate)
+    fixed = critical_height(scene, level=1.0)
+    assert fixed.critical_height == critical_height(scene, level=1.0,
+                                                    target="mesh").critical_height
+
+
+@pytest.mark.parametrize("bad", ["meshed", "Exact", 1])
+def test_target_is_validated(bad):
+    with pytest.raises(SceneError, match="target"):
+        critical_height(get_preset("paper-quartz"), target=bad)

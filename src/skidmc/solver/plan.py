@@ -18,6 +18,14 @@ from skidmc.solver.model import MELT_WIDTH_BIAS_PER_K, melt_width_floor
 __all__ = [
     "DISCRETISATION_SHARE",
     "ERROR_LEVEL0",
+    "EXACT_FINE_SHIFT",
+    "EXACT_FINE_SHIFT_SPREAD",
+    "EXACT_LIKELY_CORRECTION",
+    "EXACT_LIKELY_CORRECTION_SIGNS",
+    "EXACT_RESIDUAL_RATIO",
+    "EXACT_SIGN_FLOOR",
+    "EXACT_SIGN_RESIDUAL_RATIO",
+    "EXACT_STEADY_FINE_OVERSHOOT",
     "JUMP_COARSE_SHARE",
     "LIKELY_CORRECTION_FRACTION",
     "MAX_ADAPTIVE_LEVEL",
@@ -107,6 +115,52 @@ RICHARDSON_RESIDUAL_RATIO_LEVEL0 = 0.75
 #: order.
 SPREAD_FINE_LEVEL = 1.5
 RICHARDSON_RESIDUAL_RATIO_SPREAD = 1.0
+#: The exact target (``build_model(..., target="exact")``: the target as the exact semi-infinite
+#: solid, only the HE meshed; the default search's since issue 16's last pass). Its levels' errors
+#: are 2x (steady rebounds) to 4-5x (sign-located scenes: sliding stops, or the heating fades
+#: before rebound) smaller than the meshed target's (results/benchmarks/exact_target.md), and on
+#: the sign-located scenes they converge faster than second order and change sign, so a pair's
+#: correction can be small by cancellation. Calibrated by ``python
+#: scripts/a_posteriori_calibration.py --target exact`` (results/validation/a_posteriori_exact.md:
+#: 41 scenes apart from the error-honesty test's, x melting widths 1, 3 and 4 K, spread 1, tight
+#: roots, against the Richardson value of levels 3 and 4 at the same width):
+#:
+#: * steady rebounds: the residual |R / H - 1| is at most 0.48, 0.53, 0.58 |c| for the pairs
+#:   (0, 1), (0.5, 1.5), (1, 2) and 0.88 |c| for (1.5, 2.5): EXACT_RESIDUAL_RATIO (0.75, 23 % to
+#:   spare) below coarse level :data:`SPREAD_FINE_LEVEL`, and from there
+#:   :data:`RICHARDSON_RESIDUAL_RATIO_SPREAD` (1, the bound for any order >= 1.32 with errors of
+#:   one sign);
+#: * sign-located scenes: up to 1.38 and 1.99 |c| for (0, 1) and (0.5, 1.5), and 23 |c| or more for
+#:   the finer pairs, whose corrections (median 4.8e-5 and 1.8e-5) cancel. The estimate is
+#:   max(EXACT_SIGN_RESIDUAL_RATIO |c|, EXACT_SIGN_FLOOR 3^-(L - 1)) for the fine level L: 2 |c|
+#:   bounds the residual of any order >= 1 with errors of one sign (|4 - 2^p| / (2^p - 1) <= 2),
+#:   and the floor, measured, where the correction cancels (worst residuals 6.6e-4, 2.7e-4,
+#:   1.2e-4, 6.9e-5 at L = 1 ... 2.5: it bounds them all with the 2 |c| term, with 1 % to spare at
+#:   (0.5, 1.5), the pair rtol 1e-3 uses; per level it falls 3x, slower than the measured 4-5x
+#:   at the coarse pairs, because its finer pairs are not measured independently of the
+#:   reference).
+EXACT_RESIDUAL_RATIO = 0.75
+EXACT_SIGN_RESIDUAL_RATIO = 2.0
+EXACT_SIGN_FLOOR = 4.0e-4
+#: Likely |c| of the exact target's pair (0, 1) [1], falling 4x per level (median measured: steady
+#: 8.9e-4, 5.9e-4, 2.5e-4, 1.4e-4 for the pairs (0, 1) ... (1.5, 2.5); sign-located 3.5e-4,
+#: 1.4e-4): the first root tolerances' prediction (:func:`predicted_correction`).
+EXACT_LIKELY_CORRECTION = 1.6e-3
+EXACT_LIKELY_CORRECTION_SIGNS = 3.5e-4
+#: Where the exact target's fine root lies above its coarse root on a sign-located scene, and the
+#: spread of that, as fractions of the coarse level's modelled error :func:`modelled_error`:
+#: measured 0.119 (sd 0.036), 0.099 (0.024), 0.066 (0.032) for the pairs (0, 1), (0.5, 1.5),
+#: (1, 2) (the meshed target's: 0.375, :data:`skidmc.solver.search.FINE_SHIFT_SPREAD`). A root
+#: farther out costs doubling steps, never a wrong root.
+EXACT_FINE_SHIFT = 0.1
+EXACT_FINE_SHIFT_SPREAD = 0.04
+#: Where the exact target's fine search of a steady rebound first simulates, above the coarse root,
+#: as a fraction of :func:`modelled_error` of the coarse level: the go-side search wants its first
+#: point just above the root. The fine root lies 0.30, 0.39, 0.34 of it up (median; 90th
+#: percentile 0.40, 0.45, 0.39) for the pairs (0, 1), (0.5, 1.5), (1, 2); the meshed target's
+#: first point is 0.75 up.
+EXACT_STEADY_FINE_OVERSHOOT = 0.45
+
 #: Fraction of the calibrated worst-case correction (:func:`predicted_correction`) expected of
 #: a pair when its root tolerance is first chosen (:func:`pair_root_tolerance`). On the 23
 #: scenes of benchmarks/solver.py the pair (0, 1) measured |c| = 0.6-2.3e-3 (median ~0.5 of
@@ -208,14 +262,30 @@ def plan_for_rtol(rtol):
         return extrapolated, True
     return plain, False
 
-def first_pair_level(rtol):
+def first_pair_level(rtol, exact=False, signs=False):
     """Fine level of the first Richardson pair ``(L - 1, L)`` the default search tries [1].
 
     The calibrated model's plan (:func:`plan_for_rtol`), at least :data:`RICHARDSON_MIN_LEVEL`:
     every default result is a Richardson value, so that its error is estimated from its own
     pair (:func:`a_posteriori_error`). A plain-level plan ``L`` becomes the pair whose fine
     level is ``L`` rounded up to a whole level.
+
+    The exact target (``exact``; ``signs``: the root is located by signs): the lowest
+    half-integer level from RICHARDSON_MIN_LEVEL whose predicted estimate
+    (:func:`a_posteriori_error` of :func:`predicted_correction`, with the melting spread the
+    default search uses) and melting width's bias leave the root finder at least ROOT_SHARE
+    rtol; at most :data:`MAX_ADAPTIVE_LEVEL`. rtol 1e-2, 3e-3 -> 1; 1e-3 -> 1.5; 3e-4 -> 2.5.
     """
+    if exact:
+        level = RICHARDSON_MIN_LEVEL
+        while level < MAX_ADAPTIVE_LEVEL:
+            predicted = (a_posteriori_error(predicted_correction(level, True, signs),
+                                            level - 1.0, 1.0, True, signs)
+                         + MELT_WIDTH_BIAS_PER_K * melt_width_for_rtol(rtol, level))
+            if predicted <= (1.0 - ROOT_SHARE) * rtol:
+                break
+            level += 0.5
+        return level
     level, extrapolate = plan_for_rtol(rtol)
     if not extrapolate:
         level = math.ceil(level - 1e-9)
@@ -223,7 +293,7 @@ def first_pair_level(rtol):
 
 
 @njit(cache=True)
-def a_posteriori_error(correction, coarse_level, melt_spread):
+def a_posteriori_error(correction, coarse_level, melt_spread, exact=False, signs=False):
     """Estimated discretisation error of a Richardson value [1], from its own pair.
 
     Parameters
@@ -234,15 +304,30 @@ def a_posteriori_error(correction, coarse_level, melt_spread):
         L - 1.
     melt_spread : float
         The pair's melting spread over each HE cell [1] (0: the fixed step).
+    exact : bool
+        The pair's target is the exact semi-infinite solid (``target="exact"``).
+    signs : bool
+        The scene's root is located by signs (sliding stops, or the heating fades before
+        rebound); only with ``exact``.
 
     Returns
     -------
     float
-        :data:`RICHARDSON_RESIDUAL_RATIO` |correction|;
+        Meshed target: :data:`RICHARDSON_RESIDUAL_RATIO` |correction|;
         :data:`RICHARDSON_RESIDUAL_RATIO_LEVEL0` |correction| when ``coarse_level`` is 0;
         :data:`RICHARDSON_RESIDUAL_RATIO_SPREAD` |correction| when a spread pair's coarse level
-        is at least :data:`SPREAD_FINE_LEVEL`.
+        is at least :data:`SPREAD_FINE_LEVEL`. Exact target: :data:`EXACT_RESIDUAL_RATIO`
+        |correction| (RICHARDSON_RESIDUAL_RATIO_SPREAD from SPREAD_FINE_LEVEL); where ``signs``,
+        the larger of :data:`EXACT_SIGN_RESIDUAL_RATIO` |correction| and
+        :data:`EXACT_SIGN_FLOOR` 3^-(L - 1).
     """
+    if exact:
+        if signs:
+            return max(EXACT_SIGN_RESIDUAL_RATIO * abs(correction),
+                       EXACT_SIGN_FLOOR * 3.0 ** (-coarse_level))
+        if coarse_level >= SPREAD_FINE_LEVEL:
+            return RICHARDSON_RESIDUAL_RATIO_SPREAD * abs(correction)
+        return EXACT_RESIDUAL_RATIO * abs(correction)
     if melt_spread > 0.0 and coarse_level >= SPREAD_FINE_LEVEL:
         return RICHARDSON_RESIDUAL_RATIO_SPREAD * abs(correction)
     if coarse_level < 0.5:
@@ -272,18 +357,23 @@ def melt_bias(terms, melt_width, level):
 
 
 @njit(cache=True)
-def predicted_correction(level):
+def predicted_correction(level, exact=False, signs=False):
     """Likely size of the Richardson correction |c| of the pair ``(level - 1, level)`` [1].
 
     With the levels' errors e_L ~ :data:`ERROR_LEVEL0` 4^-L (a worst case over the refinement
     study), c = (H_L - H_{L-1}) / (3 R) ~ (e_{L-1} - e_L) / 3 = 0.25 ERROR_LEVEL0 4^-(L-1)
-    (2.25e-3 for the pair (0, 1)); :data:`LIKELY_CORRECTION_FRACTION` of that.
+    (2.25e-3 for the pair (0, 1)); :data:`LIKELY_CORRECTION_FRACTION` of that. The exact target
+    (``exact``): :data:`EXACT_LIKELY_CORRECTION` 4^-(L-1), or
+    :data:`EXACT_LIKELY_CORRECTION_SIGNS` 4^-(L-1) where the root is located by ``signs``.
     """
+    if exact:
+        return ((EXACT_LIKELY_CORRECTION_SIGNS if signs else EXACT_LIKELY_CORRECTION)
+                * 4.0 ** (-(level - 1.0)))
     return LIKELY_CORRECTION_FRACTION * 0.25 * ERROR_LEVEL0 * 4.0 ** (-(level - 1.0))
 
 
 @njit(cache=True)
-def pair_root_tolerance(rtol, level, melt_width, melt_spread):
+def pair_root_tolerance(rtol, level, melt_width, melt_spread, exact=False, signs=False):
     """First tolerance of the root finder on ln H [1] for a default search's pair at ``level``.
 
     What ``rtol`` leaves after the pair's a posteriori estimate predicted from the calibrated
@@ -297,9 +387,11 @@ def pair_root_tolerance(rtol, level, melt_width, melt_spread):
     the root errors the tolerances actually used allow to the pair's measured error, and the
     search tightens the roots (or refines the pair) while that exceeds rtol. With w from
     :func:`melt_width_for_rtol`: rtol 1e-2 -> 5e-3 (pair (0, 1), w = 4 K), 3e-3 -> 6e-4 and
-    1e-3 -> 2e-4 (the first pass of issue 16 fixed 0.2 rtol everywhere).
+    1e-3 -> 2e-4 (the first pass of issue 16 fixed 0.2 rtol everywhere). ``exact``, ``signs``:
+    as for :func:`a_posteriori_error`.
     """
-    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0, melt_spread)
+    predicted = (a_posteriori_error(predicted_correction(level, exact, signs), level - 1.0,
+                                    melt_spread, exact, signs)
                  + MELT_WIDTH_BIAS_PER_K * melt_width)
     room = rtol - predicted
     if room < 2.0 * ROOT_SHARE * rtol:
@@ -307,7 +399,7 @@ def pair_root_tolerance(rtol, level, melt_width, melt_spread):
     return max(ROOT_SHARE * rtol, min(MAX_ROOT_TOLERANCE, room))
 
 
-def jump_root_tolerances(rtol, level, melt_width, melt_spread):
+def jump_root_tolerances(rtol, level, melt_width, melt_spread, exact=False):
     """First root tolerances on ln H [1] ``(coarse, fine)`` of a pair whose margin jumps.
 
     Where sliding stops before rebound, each halving of a root's bracket costs one simulation
@@ -317,9 +409,11 @@ def jump_root_tolerances(rtol, level, melt_width, melt_spread):
     ROOT_SHARE rtol). The root errors enter the Richardson value as (4 d_fine + d_coarse) / 3,
     and the split is :data:`JUMP_COARSE_SHARE` of the room to the coarse root, the rest to the
     fine one. Each at most :data:`MAX_ROOT_TOLERANCE`. rtol 1e-3 (pair (0.5, 1.5), w = 1 K) ->
-    (3.8e-4, 1.9e-4) instead of (2e-4, 1e-4).
+    (3.8e-4, 1.9e-4) instead of (2e-4, 1e-4). ``exact``: the exact target's pair, estimated as
+    located by signs (:func:`a_posteriori_error`).
     """
-    predicted = (a_posteriori_error(predicted_correction(level), level - 1.0, melt_spread)
+    predicted = (a_posteriori_error(predicted_correction(level, exact, exact), level - 1.0,
+                                    melt_spread, exact, exact)
                  + MELT_WIDTH_BIAS_PER_K * melt_width)
     room = max(ROOT_SHARE * rtol, rtol - predicted)
     coarse = min(MAX_ROOT_TOLERANCE, JUMP_COARSE_SHARE * room)

@@ -26,6 +26,9 @@ from skidmc.physics.mechanics import EXIT_STOPS_SLIDING, impact_constants, slidi
 from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.solver.model import build_model, melt_width_floor
 from skidmc.solver.plan import (
+    EXACT_FINE_SHIFT,
+    EXACT_FINE_SHIFT_SPREAD,
+    EXACT_STEADY_FINE_OVERSHOOT,
     MAX_ADAPTIVE_LEVEL,
     MAX_ROOT_TOLERANCE,
     MELT_SHARE,
@@ -61,7 +64,7 @@ __all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "FADING_EXIT_SPEED",
            "FADING_FAST_SHIFT", "FADING_FAST_SPREAD", "FAST_STOPS_SLIDING_SPREAD",
            "FINE_SHIFT_SPREAD",
            "MAX_ADAPTIVE_ROUNDS",
-           "MELT_SHIFT_FACTOR", "TIERS", "critical_height"]
+           "MELT_SHIFT_FACTOR", "TARGETS", "TIERS", "critical_height"]
 
 #: Most corrections (tightened roots, a narrower melting width, a finer pair) the default
 #: search applies to its first Richardson pair before it reports the estimate it reached.
@@ -119,6 +122,10 @@ FADING_FAST_SPREAD = 0.02
 #: a wrong root.
 FINE_SHIFT_SPREAD = 0.06
 
+#: How the target is modelled (:func:`skidmc.solver.model.build_model`): "mesh", on its own
+#: finite-volume mesh; "exact", the exact semi-infinite solid through Duhamel's integral.
+TARGETS = ("mesh", "exact")
+
 #: Default search bounds [m]: 1 mm to 10 km of drop height.
 DEFAULT_H_MIN = 1e-3
 DEFAULT_H_MAX = 1e4
@@ -132,7 +139,7 @@ COARSE_GAP = 2.0
 def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
                     *, method="brent", level=None, extrapolate=None, melting=True,
                     runaway_fraction=None, h_guess=None, model=None, melt_width=None,
-                    melt_spread=None):
+                    melt_spread=None, target=None):
     """Critical drop height of a scene [m].
 
     Parameters
@@ -177,6 +184,14 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         (the fixed step the calibrated level model was fitted on) when ``level``, ``model``
         or ``extrapolate=False`` fixes the plan (given with a fixed plan, the reported
         calibrated estimate may understate its error by up to 8 %).
+    target : {"exact", "mesh"}, optional
+        How the target is modelled (:func:`skidmc.solver.model.build_model`). Default: "exact"
+        (the exact semi-infinite solid, only the HE meshed) in the default search, whose a
+        posteriori estimate was calibrated with it (``scripts/a_posteriori_calibration.py``;
+        2-5x smaller level errors at ~0.75x the time per simulation; docs/model.md, "The
+        target as an exact semi-infinite solid"); "mesh" (the target on its own mesh, what the
+        calibrated level model was fitted on) when ``level``, ``model`` or
+        ``extrapolate=False`` fixes the plan. Ignored with ``model``.
 
     Returns
     -------
@@ -209,8 +224,13 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     adaptive = level is None and model is None and extrapolate is not False
     if melt_spread is None:
         melt_spread = MELT_SPREAD if adaptive else 0.0
+    if target is None:
+        target = "exact" if adaptive else "mesh"
+    elif target not in TARGETS:
+        raise SceneError("target", target, f"expected one of {', '.join(TARGETS)}")
+    signs = adaptive and _margin_likely_jumps(scene)
     if adaptive:
-        level, extrapolate = first_pair_level(rtol), True
+        level, extrapolate = first_pair_level(rtol, target == "exact", signs), True
     elif level is None:
         level, planned = plan_for_rtol(rtol)
         extrapolate = planned if extrapolate is None else extrapolate
@@ -220,11 +240,11 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         melt_width = melt_width_for_rtol(rtol, level)
     common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
                   runaway_fraction=runaway_fraction, melt_width=float(melt_width),
-                  melt_spread=float(melt_spread))
+                  melt_spread=float(melt_spread), target=target)
     if adaptive:
         # The root finder gets the room the pair is likely not to use; the a posteriori
         # estimate, not the calibrated model, then decides whether it fits (_adaptive_pair).
-        return _adaptive_pair(scene, rtol, level, h_guess, common, start)
+        return _adaptive_pair(scene, rtol, level, h_guess, common, start, signs)
     x_tol = root_tolerance(rtol, level, extrapolate, melt_width)
     if not extrapolate:
         res = _search(scene, rtol, level, x_tol, model=model, h_guess=h_guess, **common)
@@ -235,27 +255,33 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
     # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
     coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
-    fine = _fine_search(scene, rtol, level, 0.5 * x_tol, coarse, x_tol, common)
+    fine = _fine_search(scene, rtol, level, 0.5 * x_tol, coarse, x_tol, common, False)
     res = _censor_beyond_bounds(_richardson(coarse, fine, x_tol, melt_width, False), h_min, h_max)
     res.evaluations = coarse.evaluations + fine.evaluations
     res.wall_time = time.perf_counter() - start
     return res
 
 
-def _fine_search(scene, rtol, level, x_tol, coarse, coarse_tol, common):
+def _fine_search(scene, rtol, level, x_tol, coarse, coarse_tol, common, signs):
     """The fine search of a Richardson pair, started from its coarse search's root and slopes.
 
     The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
     errors are negative and shrink 4x per level; the fine level keeps 1/4 of it): the go-side
     search starts that far up, which lands on the go side within the error model. Where the
     margin jumps (sliding stops), the coarse root's own tolerance ``coarse_tol`` [1] widens
-    the prior of the fine root (:func:`skidmc.solver.roots.prior_bisection_root`).
+    the prior of the fine root (:func:`skidmc.solver.roots.prior_bisection_root`). With the
+    exact target on a scene located by ``signs``, the prior is the one measured for it
+    (:data:`skidmc.solver.plan.EXACT_FINE_SHIFT`, ``EXACT_FINE_SHIFT_SPREAD``).
     """
     coarse_error = modelled_error(level - 1.0)
+    overshoot, spread = 0.75, FINE_SHIFT_SPREAD
+    if common["target"] == "exact":
+        overshoot = 2.0 * EXACT_FINE_SHIFT if signs else EXACT_STEADY_FINE_OVERSHOOT
+        spread = EXACT_FINE_SHIFT_SPREAD
     return _search(scene, rtol, level, x_tol,
                    h_guess=coarse.critical_height if coarse.censored is None else None,
-                   overshoot=0.75 * coarse_error,
-                   guess_sigma=FINE_SHIFT_SPREAD * coarse_error + 0.5 * coarse_tol,
+                   overshoot=overshoot * coarse_error,
+                   guess_sigma=spread * coarse_error + 0.5 * coarse_tol,
                    slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history),
                    **common)
 
@@ -266,7 +292,7 @@ def _root_error(coarse_tol, fine_tol):
     return (4.0 * fine_tol + coarse_tol) / 3.0
 
 
-def _adaptive_pair(scene, rtol, level, h_guess, common, start):
+def _adaptive_pair(scene, rtol, level, h_guess, common, start, signs):
     """The default search: a Richardson pair whose own estimate is brought within ``rtol``.
 
     The first pair ``(level - 1, level)`` gets the root tolerance :func:`pair_root_tolerance`
@@ -287,23 +313,24 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
     """
     melt_width = common["melt_width"]
     spread = common["melt_spread"]
-    if _margin_likely_jumps(scene):
-        coarse_tol, fine_tol = jump_root_tolerances(rtol, level, melt_width, spread)
+    exact = common["target"] == "exact"
+    if signs:
+        coarse_tol, fine_tol = jump_root_tolerances(rtol, level, melt_width, spread, exact)
     else:
-        coarse_tol = pair_root_tolerance(rtol, level, melt_width, spread)
+        coarse_tol = pair_root_tolerance(rtol, level, melt_width, spread, exact)
         fine_tol = 0.5 * coarse_tol
     coarse = _search(scene, rtol, level - 1.0, coarse_tol, h_guess=h_guess, **common)
-    fine = _fine_search(scene, rtol, level, fine_tol, coarse, coarse_tol, common)
+    fine = _fine_search(scene, rtol, level, fine_tol, coarse, coarse_tol, common, signs)
     evaluations = coarse.evaluations + fine.evaluations
     melt, extra = _melt_width_bias(scene, coarse, common)
     evaluations += extra
     res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol), melt_width, True, melt,
-                      spread)
+                      spread, exact, signs)
     narrowed = 0
     for _ in range(MAX_ADAPTIVE_ROUNDS):
         if not (res.extrapolated and res.error_estimate > rtol * (1.0 + 1e-12)):
             break
-        pair = a_posteriori_error(res.richardson_correction, coarse.level, spread)
+        pair = a_posteriori_error(res.richardson_correction, coarse.level, spread, exact, signs)
         room = rtol - pair - res.melt_bias_estimate
         # Never below the coarse level's floor: a step far narrower than a level resolves is
         # badly wrong there (model.MELT_WIDTH_LEVEL0).
@@ -329,13 +356,14 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
                         / res.melt_bias_estimate)
             common = dict(common, melt_width=width)
             narrowed += 1
-            x_tol = pair_root_tolerance(rtol, fine.level, width, spread)
+            x_tol = pair_root_tolerance(rtol, fine.level, width, spread, exact, signs)
             coarse = _search(scene, rtol, coarse.level, x_tol, h_guess=coarse.critical_height,
                              overshoot=2.0 * res.melt_bias_estimate + x_tol,
                              slope=margin_slope(coarse.history),
                              go_slope=go_side_slope(coarse.history), **common)
             coarse_tol, fine_tol = x_tol, 0.5 * x_tol
-            fine = _fine_search(scene, rtol, fine.level, fine_tol, coarse, coarse_tol, common)
+            fine = _fine_search(scene, rtol, fine.level, fine_tol, coarse, coarse_tol, common,
+                                signs)
             melt, extra = _melt_width_bias(scene, coarse, common)
             evaluations += coarse.evaluations + fine.evaluations + extra
         elif fine.level + 1.0 <= MAX_ADAPTIVE_LEVEL and (
@@ -348,7 +376,7 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
             # level. Its correction should shrink 4x; half is assumed.
             correction = res.richardson_correction
             room = (rtol - res.melt_bias_estimate
-                    - a_posteriori_error(0.5 * correction, fine.level, spread))
+                    - a_posteriori_error(0.5 * correction, fine.level, spread, exact, signs))
             tight = min(MAX_ROOT_TOLERANCE,
                         max(0.5 * ROOT_SHARE * rtol, (3.0 * room - fine_tol) / 4.0))
             guess = res.critical_height * (1.0 - 0.25 * correction)
@@ -362,7 +390,7 @@ def _adaptive_pair(scene, rtol, level, h_guess, common, start):
         else:
             break
         res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol),
-                          common["melt_width"], True, melt, spread)
+                          common["melt_width"], True, melt, spread, exact, signs)
     res = _censor_beyond_bounds(res, common["h_min"], common["h_max"])
     res.evaluations = evaluations
     res.wall_time = time.perf_counter() - start
@@ -445,7 +473,7 @@ def _melt_width_bias(scene, coarse, common):
               else {"runaway_fraction": common["runaway_fraction"]})
     model = build_model(scene, level=coarse.level, melting=common["melting"],
                         melt_width=2.0 * common["melt_width"],
-                        melt_spread=common["melt_spread"], **kwargs)
+                        melt_spread=common["melt_spread"], target=common["target"], **kwargs)
     m_wide = simulate(model, height).margin
     if not math.isfinite(m_wide):
         return None, 1
@@ -467,7 +495,8 @@ def _censor_beyond_bounds(res, h_min, h_max):
                                critical_height=h_max if censored == "above" else h_min)
 
 
-def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None, melt_spread=0.0):
+def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None, melt_spread=0.0,
+                exact=False, signs=False):
     """The Richardson value of a pair of searches (a new result; ``fine`` if either is censored).
 
     Its ``error_estimate`` [1] is, for the default (``adaptive``) search, measured on the pair:
@@ -487,7 +516,7 @@ def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None, melt_sprea
         # The width's bias: the calibrated bound, or what this scene measured if larger.
         res.melt_bias_estimate = max(melt_bias_bound(fine.terms, melt_width), melt or 0.0)
         res.error_estimate = (a_posteriori_error(res.richardson_correction, coarse.level,
-                                                 melt_spread)
+                                                 melt_spread, exact, signs)
                               + res.melt_bias_estimate + x_tol)
     else:
         res.error_estimate = (extrapolated_error(fine.level) + x_tol
@@ -495,8 +524,8 @@ def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None, melt_sprea
     return res
 
 def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
-            melt_width, melt_spread=0.0, model=None, h_guess=None, overshoot=None, slope=None,
-            go_slope=None, known=(), guess_sigma=None):
+            melt_width, melt_spread=0.0, target="mesh", model=None, h_guess=None,
+            overshoot=None, slope=None, go_slope=None, known=(), guess_sigma=None):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
@@ -513,7 +542,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     if own_model:
         kwargs = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
         model = build_model(scene, level=level, melting=melting, melt_width=melt_width,
-                            melt_spread=melt_spread, **kwargs)
+                            melt_spread=melt_spread, target=target, **kwargs)
     base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
                 exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
                 error_estimate=(modelled_error(level) + x_tol
@@ -530,7 +559,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
                          max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)), h_min=h_min,
                          h_max=h_max, method=method, melting=melting,
                          runaway_fraction=runaway_fraction, melt_width=melt_width,
-                         melt_spread=melt_spread)
+                         melt_spread=melt_spread, target=target)
         coarse_evaluations = coarse.evaluations
         if coarse.censored is None:
             h_guess = coarse.critical_height
