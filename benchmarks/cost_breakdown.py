@@ -192,7 +192,8 @@ def spread_search():
     SEARCH_REFERENCE_RTOL."""
     out = []
     for label, scene in ([(name, get_preset(name)) for name in PRESETS] + off_preset_scenes()):
-        ref = critical_height(scene, rtol=SEARCH_REFERENCE_RTOL, melt_spread=0.0)
+        ref = critical_height(scene, rtol=SEARCH_REFERENCE_RTOL, melt_spread=0.0,
+                              target="mesh")
         for spread in (0.0, MELT_SPREAD):
             res = critical_height(scene, rtol=SEARCH_RTOL, melt_spread=spread)
             times = []

@@ -9,7 +9,8 @@ Measures, in one run on this machine and on one core (``NUMBA_NUM_THREADS=1``, B
 2. **skidmc** at several ``rtol`` values in the full tier, and the fast tier when present;
 3. for each: the time per critical height and its error against a converged reference height
    (skidmc's finest run: Richardson extrapolation of levels 3 and 4, ``rtol = 3e-5``, with
-   the fixed melting step ``melt_spread=0``, independent of the default search's spread),
+   the fixed melting step ``melt_spread=0`` and the meshed target ``target="mesh"``,
+   independent of the default search's spread and exact target),
    over the report presets and (skidmc only) 16 off-preset scenes plus two at E/R = 15,000 K
    (the issue-16 box: quartz, alumina, steel and an in-between target; mu 0.04-0.3; flow stress
    15-45 ksi; mass 5-40 lb; pendulum and vertical drops);
@@ -115,9 +116,11 @@ def run(presets, rtols, peer_settings, repeats, fast_repeats, off_preset=()):
     scenes = [(name, get_preset(name), "preset") for name in presets]
     scenes += [(name, scene, "off-preset") for name, scene in off_preset]
     for name, scene, kind in scenes:
-        # The fixed melting step (melt_spread=0): a discretisation independent of the default
-        # search's spread, converging to the same model.
-        ref, ref_time = _time_skidmc(scene, 1, rtol=REFERENCE_RTOL, melt_spread=0.0)
+        # The fixed melting step (melt_spread=0) and the meshed target: a discretisation
+        # independent of the default search's spread and exact target, converging to the same
+        # model.
+        ref, ref_time = _time_skidmc(scene, 1, rtol=REFERENCE_RTOL, melt_spread=0.0,
+                                     target="mesh")
         h_ref = ref.critical_height
         print(f"{name}: reference H = {h_ref:.7g} m ({h_ref / FT:.5g} ft), level {ref.level:g}, "
               f"{ref_time:.1f} s", flush=True)
