@@ -142,9 +142,15 @@ RICHARDSON_RESIDUAL_RATIO_SPREAD = 1.0
 EXACT_RESIDUAL_RATIO = 0.75
 EXACT_SIGN_RESIDUAL_RATIO = 2.0
 EXACT_SIGN_FLOOR = 4.0e-4
-#: Likely |c| of the exact target's pair (0, 1) [1], falling 4x per level (median measured: steady
-#: 8.9e-4, 5.9e-4, 2.5e-4, 1.4e-4 for the pairs (0, 1) ... (1.5, 2.5); sign-located 3.5e-4,
-#: 1.4e-4): the first root tolerances' prediction (:func:`predicted_correction`).
+#: Likely |c| of the exact target's pair (0, 1) [1], falling 4x per level: the first root
+#: tolerances' prediction (:func:`predicted_correction`). Measured medians: steady 8.9e-4, 5.9e-4,
+#: 2.5e-4, 1.4e-4 for the pairs (0, 1) ... (1.5, 2.5); sign-located 3.5e-4, 1.4e-4. The steady
+#: value is set above its median, where the default rtol 1e-3 costs least: in kernel-cost units
+#: (simulations weighted by their level's cost) the steady benchmark scenes' median search took
+#: 5.0 with 1.6e-3 and 6.9 with 1.0e-3, whose looser first roots then had to be tightened; but
+#: 4.8 against 3.0 at rtol 3e-3 and 28 against 18 at 3e-4 (pair (2, 3) against (1.5, 2.5)):
+#: :func:`pair_root_tolerance`'s step from the room to ROOT_SHARE rtol makes the best value
+#: depend on rtol. 3.5e-4 for the sign-located scenes: 5e-4 cost the same, 7e-4 more.
 EXACT_LIKELY_CORRECTION = 1.6e-3
 EXACT_LIKELY_CORRECTION_SIGNS = 3.5e-4
 #: Where the exact target's fine root lies above its coarse root on a sign-located scene, and the
@@ -274,7 +280,8 @@ def first_pair_level(rtol, exact=False, signs=False):
     half-integer level from RICHARDSON_MIN_LEVEL whose predicted estimate
     (:func:`a_posteriori_error` of :func:`predicted_correction`, with the melting spread the
     default search uses) and melting width's bias leave the root finder at least ROOT_SHARE
-    rtol; at most :data:`MAX_ADAPTIVE_LEVEL`. rtol 1e-2, 3e-3 -> 1; 1e-3 -> 1.5; 3e-4 -> 2.5.
+    rtol; at most :data:`MAX_ADAPTIVE_LEVEL`. rtol 1e-2, 3e-3 -> 1; 1e-3 -> 1.5; 3e-4 -> 3
+    (steady) or 2.5 (signs).
     """
     if exact:
         level = RICHARDSON_MIN_LEVEL
