@@ -52,6 +52,7 @@ __all__ = [
     "pair_root_tolerance",
     "plan_for_rtol",
     "predicted_correction",
+    "predicted_pair_error",
     "root_tolerance",
 ]
 
@@ -277,18 +278,17 @@ def first_pair_level(rtol, exact=False, signs=False):
     level is ``L`` rounded up to a whole level.
 
     The exact target (``exact``; ``signs``: the root is located by signs): the lowest
-    half-integer level from RICHARDSON_MIN_LEVEL whose predicted estimate
-    (:func:`a_posteriori_error` of :func:`predicted_correction`, with the melting spread the
-    default search uses) and melting width's bias leave the root finder at least ROOT_SHARE
+    half-integer level from RICHARDSON_MIN_LEVEL whose :func:`predicted_pair_error` (the
+    predicted estimate and the melting width's bias) leaves the root finder at least ROOT_SHARE
     rtol; at most :data:`MAX_ADAPTIVE_LEVEL`. rtol 1e-2, 3e-3 -> 1; 1e-3 -> 1.5; 3e-4 -> 3
     (steady) or 2.5 (signs).
     """
     if exact:
         level = RICHARDSON_MIN_LEVEL
         while level < MAX_ADAPTIVE_LEVEL:
-            predicted = (a_posteriori_error(predicted_correction(level, True, signs),
-                                            level - 1.0, 1.0, True, signs)
-                         + MELT_WIDTH_BIAS_PER_K * melt_width_for_rtol(rtol, level))
+            # The exact rule does not depend on the melting spread (1: the default's).
+            predicted = predicted_pair_error(level, melt_width_for_rtol(rtol, level), 1.0,
+                                             True, signs)
             if predicted <= (1.0 - ROOT_SHARE) * rtol:
                 break
             level += 0.5
@@ -380,6 +380,16 @@ def predicted_correction(level, exact=False, signs=False):
 
 
 @njit(cache=True)
+def predicted_pair_error(level, melt_width, melt_spread, exact=False, signs=False):
+    """Likely estimate of the pair ``(level - 1, level)`` before it is searched [1]: its
+    :func:`a_posteriori_error` of :func:`predicted_correction` plus the melting width's bias
+    bound. ``exact``, ``signs``: as for :func:`a_posteriori_error`."""
+    return (a_posteriori_error(predicted_correction(level, exact, signs), level - 1.0,
+                               melt_spread, exact, signs)
+            + MELT_WIDTH_BIAS_PER_K * melt_width)
+
+
+@njit(cache=True)
 def pair_root_tolerance(rtol, level, melt_width, melt_spread, exact=False, signs=False):
     """First tolerance of the root finder on ln H [1] for a default search's pair at ``level``.
 
@@ -397,10 +407,7 @@ def pair_root_tolerance(rtol, level, melt_width, melt_spread, exact=False, signs
     1e-3 -> 2e-4 (the first pass of issue 16 fixed 0.2 rtol everywhere). ``exact``, ``signs``:
     as for :func:`a_posteriori_error`.
     """
-    predicted = (a_posteriori_error(predicted_correction(level, exact, signs), level - 1.0,
-                                    melt_spread, exact, signs)
-                 + MELT_WIDTH_BIAS_PER_K * melt_width)
-    room = rtol - predicted
+    room = rtol - predicted_pair_error(level, melt_width, melt_spread, exact, signs)
     if room < 2.0 * ROOT_SHARE * rtol:
         return ROOT_SHARE * rtol
     return max(ROOT_SHARE * rtol, min(MAX_ROOT_TOLERANCE, room))
@@ -419,10 +426,8 @@ def jump_root_tolerances(rtol, level, melt_width, melt_spread, exact=False):
     (3.8e-4, 1.9e-4) instead of (2e-4, 1e-4). ``exact``: the exact target's pair, estimated as
     located by signs (:func:`a_posteriori_error`).
     """
-    predicted = (a_posteriori_error(predicted_correction(level, exact, exact), level - 1.0,
-                                    melt_spread, exact, exact)
-                 + MELT_WIDTH_BIAS_PER_K * melt_width)
-    room = max(ROOT_SHARE * rtol, rtol - predicted)
+    room = max(ROOT_SHARE * rtol,
+               rtol - predicted_pair_error(level, melt_width, melt_spread, exact, exact))
     coarse = min(MAX_ROOT_TOLERANCE, JUMP_COARSE_SHARE * room)
     fine = min(MAX_ROOT_TOLERANCE, (3.0 * room - coarse) / 4.0)
     return coarse, fine
