@@ -45,6 +45,7 @@ __all__ = [
     "DEFAULT_RUNAWAY_FRACTION",
     "INFO_EVENT",
     "INFO_FAILED",
+    "INFO_FROZEN_WIDTH",
     "INFO_HISTORY_FULL",
     "INFO_NEWTON_FAILURES",
     "INFO_NEWTON_ITERATIONS",
@@ -57,6 +58,7 @@ __all__ = [
     "INFO_T_MAX",
     "INFO_Y_EXIT_MAX",
     "INFO_Y_MAX",
+    "FREEZE_WIDTH_AFTER",
     "MELT_SPREAD",
     "NEWTON_TOLERANCE_FRACTION",
     "RETRY_SAFETY",
@@ -82,7 +84,8 @@ INFO_Y_EXIT_MAX = 9     # highest fraction reacted at the exit time [1]
 INFO_NEWTON_FAILURES = 10  # steps rejected because Newton did not converge
 INFO_NEWTON_ITERATIONS = 11  # Newton iterations, all steps
 INFO_HISTORY_FULL = 12  # 1.0 when the exact target's flux history ran out of room
-INFO_SIZE = 13
+INFO_FROZEN_WIDTH = 13  # 1.0 when the first HE cell's melting width was frozen (see kernel)
+INFO_SIZE = 14
 
 # Ratio LTE / (corrector - quadratic predictor) of BDF2 at constant step:
 # BDF2 error -(2/9) h^3 y''', predictor error +h^3 y''' -> 2/11.
@@ -110,6 +113,14 @@ DEFAULT_RUNAWAY_FRACTION = 1e-5
 #: level's own error (~4e-3, 1e-3, 2.5e-4), which Richardson's extrapolation and the a
 #: posteriori estimate take in with it. 0.03 halved the mean shift but gave back half the gain.
 NEWTON_TOLERANCE_FRACTION = 0.1
+
+#: Newton failures in one run after which the first HE cell's spread melting width is frozen
+#: for the rest of the run (exact target only; see ``frozen_width`` in :func:`simulate_core`).
+#: Over 8,800 runs (the presets, the off-preset scenes of ``benchmarks/solver.py`` and half of
+#: ``scripts/fast_tier_error.py``'s training set, levels 0-1.5, both targets, with and without
+#: the spread, at 0.97-1.03 H_c) a run had at most 18; the two runs that stalled had 933 and 940
+#: after 3,000 attempts.
+FREEZE_WIDTH_AFTER = 40
 
 #: Reaction sources are skipped in cells too cold to release this fraction of the step
 #: tolerance [1] over the whole run (see ``t_cold`` in the kernel).
@@ -191,7 +202,7 @@ def _he_enthalpy(temperature, rho_c, latent_v, melting_point, melt_width):
 
 @njit(**_JIT, inline="always")
 def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_point, melt_width,
-                      melt_spread):
+                      melt_spread, frozen_width=0.0):
     """Enthalpy [J/m^3] of HE cell ``i`` with its melting spread over the cell's own range.
 
     A melting front crosses a cell in the time the temperature profile takes to sweep the
@@ -205,7 +216,9 @@ def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_poin
     as the linear profile inside it would. W_i -> w as the mesh is refined (dT_i ~ cell
     width), so the spreading is a discretisation error and converges with the levels, but not
     as cleanly second order as the fixed step (docs/model.md, "Melting spread over a cell").
-    s = 0 is the fixed step of :func:`_he_enthalpy`, to the last bit.
+    s = 0 is the fixed step of :func:`_he_enthalpy`, to the last bit. ``frozen_width`` > 0 [K]
+    replaces the first cell's (``i`` = 0, the exact target's) spread width by that fixed one (the
+    kernel's fallback where that cell's enthalpy folds; :func:`simulate_core`).
 
     Returns
     -------
@@ -221,6 +234,9 @@ def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_poin
         h, dh = _he_enthalpy(t_i, rc, latent_v, melting_point, melt_width)
         return h, dh, 0.0, 0.0
     if i == 0:
+        if frozen_width > 0.0:
+            h, dh = _he_enthalpy(t_i, rc, latent_v, melting_point, frozen_width)
+            return h, dh, 0.0, 0.0
         # The exact target (n_target = 0) leaves no cell below the first HE cell: its range
         # comes from the one-sided difference to the next cell (centres 0.5 (w_0 + w_1) apart).
         diff = temp[1] - temp[0]
@@ -535,6 +551,16 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
     t_max_prev = initial_temperature
     y_max_prev = 0.0
     newton_tol = NEWTON_TOLERANCE_FRACTION * tol_temperature
+    # With the exact target the first HE cell's spread width comes from the one-sided
+    # difference T_1 - T_0, so its enthalpy depends on its own temperature twice (through T_0
+    # and through the width) and can fold (decrease with T_0) near T_m: the implicit step then
+    # has no solution near the last one at any step size, and the run stalls (two scenes of
+    # scripts/fast_tier_error.py's test set: 200,000 steps, half of them Newton failures). After
+    # FREEZE_WIDTH_AFTER Newton failures the cell's width is frozen at its value at the last
+    # accepted step, where the stored enthalpy is exactly consistent with it, and the multistep
+    # history restarts; its enthalpy then increases with T_0. A run that never gets there is
+    # unchanged to the last bit.
+    frozen_width = 0.0
 
     while t < t_stop and steps + rejected < max_steps:
         # Land exactly on t_exit (flux kink or jump) and on t_stop, stretching the step
@@ -615,7 +641,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                 if i >= n_target:
                     h_new[i], dh_dself, dh_dlow, dh_dup = _he_cell_enthalpy(
                         i, n, n_target, temp_new, width, rho_c, latent_v, melting_point,
-                        melt_width, melt_spread)
+                        melt_width, melt_spread, frozen_width)
                 else:
                     h_new[i] = rho_c[i] * temp_new[i]
                     dh_dself = rho_c[i]
@@ -707,6 +733,17 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
             rejected += 1
             if not converged:
                 info[INFO_NEWTON_FAILURES] += 1
+                if (exact_target and melt_spread > 0.0 and latent_v > 0.0 and n > 1
+                        and frozen_width == 0.0
+                        and info[INFO_NEWTON_FAILURES] >= FREEZE_WIDTH_AFTER):
+                    # The width _he_cell_enthalpy gives cell 0 at the accepted temperatures.
+                    spread = (melt_spread * abs(temp[1] - temp[0]) * width[0]
+                              / (0.5 * width[0] + 0.5 * width[1]))
+                    frozen_width = math.sqrt(melt_width * melt_width + spread * spread)
+                    h[0], _ = _he_enthalpy(temp[0], rho_c[0], latent_v, melting_point,
+                                           frozen_width)
+                    n_hist = 0
+                    info[INFO_FROZEN_WIDTH] = 1.0
             if converged:
                 dt *= max(0.2, RETRY_SAFETY * (tol_temperature / err) ** (1.0 / 3.0))
             else:
