@@ -554,8 +554,9 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
     # With the exact target the first HE cell's spread width comes from the one-sided
     # difference T_1 - T_0, so its enthalpy depends on its own temperature twice (through T_0
     # and through the width) and can fold (decrease with T_0) near T_m: the implicit step then
-    # has no solution near the last one at any step size, and the run stalls (two scenes of
-    # scripts/fast_tier_error.py's test set: 200,000 steps, half of them Newton failures). After
+    # has no solution near the last one at any step size, and the run stalls (three scenes of
+    # scripts/fast_tier_error.py's sets, scripts/stall_sweep.py: up to 200,000 steps, half of
+    # the attempts Newton failures). After
     # FREEZE_WIDTH_AFTER Newton failures the cell's width is frozen at its value at the last
     # accepted step, where the stored enthalpy is exactly consistent with it, and the multistep
     # history restarts; its enthalpy then increases with T_0. A run that never gets there is
