@@ -201,6 +201,23 @@ def _he_enthalpy(temperature, rho_c, latent_v, melting_point, melt_width):
 
 
 @njit(**_JIT, inline="always")
+def _first_cell_range(temp, width):
+    """The first HE cell's temperature difference across it [K] and its width over the span
+    of that difference [1], with the exact target (n_target = 0): no cell lies below it, so the
+    range comes from the one-sided difference to the next cell (centres 0.5 (w_0 + w_1) apart).
+    """
+    return temp[1] - temp[0], width[0] / (0.5 * width[0] + 0.5 * width[1])
+
+
+@njit(**_JIT, inline="always")
+def _spread_width(diff, ratio, melt_width, melt_spread):
+    """The spread s |diff| ratio [K] of a cell's melting step and the step's width
+    W = sqrt(w^2 + spread^2) [K] (:func:`_he_cell_enthalpy`)."""
+    spread = melt_spread * abs(diff) * ratio
+    return spread, math.sqrt(melt_width * melt_width + spread * spread)
+
+
+@njit(**_JIT, inline="always")
 def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_point, melt_width,
                       melt_spread, frozen_width=0.0):
     """Enthalpy [J/m^3] of HE cell ``i`` with its melting spread over the cell's own range.
@@ -237,10 +254,7 @@ def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_poin
         if frozen_width > 0.0:
             h, dh = _he_enthalpy(t_i, rc, latent_v, melting_point, frozen_width)
             return h, dh, 0.0, 0.0
-        # The exact target (n_target = 0) leaves no cell below the first HE cell: its range
-        # comes from the one-sided difference to the next cell (centres 0.5 (w_0 + w_1) apart).
-        diff = temp[1] - temp[0]
-        ratio = width[0] / (0.5 * width[0] + 0.5 * width[1])
+        diff, ratio = _first_cell_range(temp, width)
     else:
         diff = temp[i + 1] - temp[i - 1]
         ratio = width[i] / (0.5 * width[i - 1] + width[i] + 0.5 * width[i + 1])
@@ -250,8 +264,7 @@ def _he_cell_enthalpy(i, n, n_target, temp, width, rho_c, latent_v, melting_poin
     # are apart), so |deviation| > _SETTLED_Z (w + spread) puts |z| above it.
     if abs(deviation) > _SETTLED_Z * (melt_width + melt_spread * abs(diff)):
         return rc * t_i + (latent_v if deviation > 0.0 else 0.0), rc, 0.0, 0.0
-    spread = melt_spread * abs(diff) * ratio
-    step_width = math.sqrt(melt_width * melt_width + spread * spread)
+    spread, step_width = _spread_width(diff, ratio, melt_width, melt_spread)
     z = deviation / step_width
     if abs(z) > _SETTLED_Z:
         return rc * t_i + (latent_v if z > 0.0 else 0.0), rc, 0.0, 0.0
@@ -738,9 +751,8 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                         and frozen_width == 0.0
                         and info[INFO_NEWTON_FAILURES] >= FREEZE_WIDTH_AFTER):
                     # The width _he_cell_enthalpy gives cell 0 at the accepted temperatures.
-                    spread = (melt_spread * abs(temp[1] - temp[0]) * width[0]
-                              / (0.5 * width[0] + 0.5 * width[1]))
-                    frozen_width = math.sqrt(melt_width * melt_width + spread * spread)
+                    diff, ratio = _first_cell_range(temp, width)
+                    _, frozen_width = _spread_width(diff, ratio, melt_width, melt_spread)
                     h[0], _ = _he_enthalpy(temp[0], rho_c[0], latent_v, melting_point,
                                            frozen_width)
                     n_hist = 0
