@@ -56,6 +56,7 @@ from skidmc.ensemble.study_model import (
     U_TAIL,
     Distribution,
     StudyScene,
+    prefactor_from_rate,
 )
 from skidmc.scene import SI_UNITS
 from skidmc.scene.units import from_si
@@ -282,7 +283,7 @@ class _CriticalHeight:
             t_ref = self.study.epistemic[RATE_AT_REFERENCE].reference_temperature
             t_act = values.get("kinetics.activation_temperature",
                                np.full(n, self.surface.scene.kinetics_activation_temperature))
-            values["kinetics.prefactor"] = rate * np.exp(t_act / t_ref)
+            values["kinetics.prefactor"] = prefactor_from_rate(rate, t_act, t_ref)
         return values
 
     def __call__(self, x: np.ndarray) -> np.ndarray:

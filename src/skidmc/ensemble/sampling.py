@@ -33,6 +33,7 @@ from scipy.special import ndtr, ndtri
 from scipy.stats import qmc
 
 from skidmc.ensemble.study import RATE_AT_REFERENCE, U_TAIL, Study
+from skidmc.ensemble.study_model import prefactor_from_rate
 
 __all__ = [
     "MC_BLOCK",
@@ -308,6 +309,7 @@ def transform(study: Study, u: np.ndarray) -> list[dict[str, np.ndarray]]:
             t_act = values.get("kinetics.activation_temperature",
                                sc.nominal("kinetics.activation_temperature"))
             t_ref = sc.uncertain[RATE_AT_REFERENCE].reference_temperature
-            values["kinetics.prefactor"] = values[RATE_AT_REFERENCE] * np.exp(t_act / t_ref)
+            values["kinetics.prefactor"] = prefactor_from_rate(values[RATE_AT_REFERENCE], t_act,
+                                                                t_ref)
         out.append(values)
     return out

@@ -103,6 +103,7 @@ from skidmc.ensemble.study_model import (
     StudyError,
     StudyScene,
     check_n,
+    prefactor_from_rate,
 )
 from skidmc.errors import SceneError
 from skidmc.scene import SCENE_KEYS, SI_UNITS, make_scene
@@ -573,7 +574,7 @@ class _Parser:
         for rate in rates:
             for t_act in temps:
                 with np.errstate(over="ignore", invalid="ignore"):
-                    z = float(rate * np.exp(t_act / d.reference_temperature))
+                    z = float(prefactor_from_rate(rate, t_act, d.reference_temperature))
                 if not (math.isfinite(z) and z > 0):
                     raise self.error(
                         _toml_key("uncertain", RATE_AT_REFERENCE), dict(d.params),

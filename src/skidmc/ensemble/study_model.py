@@ -33,6 +33,7 @@ __all__ = [
     "StudyScene",
     "STUDY_RANGES",
     "check_n",
+    "prefactor_from_rate",
 ]
 
 #: How an uncertain input is drawn: varying from drop to drop, or fixed but unknown.
@@ -47,6 +48,13 @@ DESIGN_METHODS: tuple[str, ...] = ("mc", "lhs", "sobol", "saltelli")
 #: Williams, J. Phys. Chem. 98 (1994) 12242), so the rate near the measured temperatures is
 #: far better known than Z; docs/inputs.md, "Kinetics".
 RATE_AT_REFERENCE = "kinetics.rate_at_reference"
+
+
+def prefactor_from_rate(rate, activation_temperature, reference_temperature):
+    """Arrhenius prefactor Z = k_ref exp(E/R / T_ref) [1/s] of the rate ``rate`` = k_ref [1/s]
+    at ``reference_temperature`` T_ref [K], for ``activation_temperature`` E/R [K] (floats or
+    arrays; inf where it overflows)."""
+    return rate * np.exp(activation_temperature / reference_temperature)
 
 #: Sampled keys that are not scene keys: key -> (SI unit, long name).
 EXTRA_KEYS: dict[str, tuple[str, str]] = {
