@@ -56,6 +56,7 @@ def prefactor_from_rate(rate, activation_temperature, reference_temperature):
     arrays; inf where it overflows)."""
     return rate * np.exp(activation_temperature / reference_temperature)
 
+
 #: Sampled keys that are not scene keys: key -> (SI unit, long name).
 EXTRA_KEYS: dict[str, tuple[str, str]] = {
     RATE_AT_REFERENCE: (
