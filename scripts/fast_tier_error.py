@@ -105,6 +105,16 @@ def scene_set(kind):
     return scenes
 
 
+def sweep_items(n_broad=300, seed=3):
+    """(set, index, scene) of the sweeps' scenes (``scripts/stall_sweep.py``,
+    ``scripts/sign_commit.py``): the training and test sets and a broad draw of ``n_broad``."""
+    items = [(kind, i, scene) for kind in ("train", "test")
+             for i, (_, scene) in enumerate(scene_set(kind))]
+    items += [(f"broad seed {seed}", i, scene)
+              for i, (_, scene) in enumerate(broad_scenes(n_broad, seed))]
+    return items
+
+
 def full_heights(scenes):
     """Full-model heights [m], censoring and wall time per scene [s]."""
     h, cens, wall = [], [], []

@@ -53,7 +53,7 @@ from skidmc.solver import build_model, critical_height
 from skidmc.solver.simulate import kernel_arguments
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from fast_tier_error import broad_scenes, scene_set  # noqa: E402
+from fast_tier_error import sweep_items  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
 LEVELS = (0.0, 0.5, 1.0, 1.5)
@@ -121,10 +121,7 @@ def main(argv=None):
                         help="commit fraction to try (default: the kernel's)")
     args = parser.parse_args(argv)
     COMMIT["fraction"] = args.fraction
-    items = [(kind, i, scene) for kind in ("train", "test")
-             for i, (_, scene) in enumerate(scene_set(kind))]
-    items += [("broad seed 3", i, scene)
-              for i, (_, scene) in enumerate(broad_scenes(args.broad, 3))]
+    items = sweep_items(args.broad)
     with multiprocessing.Pool(args.processes) as pool:
         results = []
         for n, res in enumerate(pool.imap_unordered(sweep, items, chunksize=4), 1):

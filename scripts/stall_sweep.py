@@ -24,7 +24,7 @@ from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.solver import build_model, critical_height
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from fast_tier_error import broad_scenes, scene_set  # noqa: E402
+from fast_tier_error import sweep_items  # noqa: E402
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
 LEVELS = (0.0, 0.5, 1.0, 1.5)
@@ -55,9 +55,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--processes", type=int, default=2)
     args = parser.parse_args(argv)
-    items = [(kind, i, scene) for kind in ("train", "test")
-             for i, (_, scene) in enumerate(scene_set(kind))]
-    items += [("broad seed 3", i, scene) for i, (_, scene) in enumerate(broad_scenes(300, 3))]
+    items = sweep_items()
     started = time.time()
     with multiprocessing.Pool(args.processes) as pool:
         rows = pool.map(sweep, items, chunksize=8)
