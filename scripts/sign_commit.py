@@ -71,9 +71,9 @@ COMMIT = {"fraction": SIGN_COMMIT_FRACTION}
 
 def _run(model, height, commit):
     """Kernel info of the sign-only run at ``height`` [m], with or without the commit rule."""
-    args = list(kernel_arguments(model, height, until_exit=True))
-    args[-1] = COMMIT["fraction"] if commit else 0.0
-    return simulate_kernel(*args)
+    return simulate_kernel(*kernel_arguments(
+        model, height, until_exit=True,
+        sign_commit_fraction=COMMIT["fraction"] if commit else 0.0))
 
 
 def _is_go(info, t_exit):

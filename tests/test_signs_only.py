@@ -41,9 +41,9 @@ def test_stopping_at_the_exit_keeps_the_run_up_to_it(gold):
     _, h_c, model = gold
     for factor in (1.01, 1.03):          # go side: the event comes before the exit
         full = simulate(model, factor * h_c)
-        args = list(kernel_arguments(model, factor * h_c, until_exit=True))
-        args[-1] = 0.0                   # the commit rule off (next test)
-        info = simulate_kernel(*args)
+        # The commit rule off (next test).
+        info = simulate_kernel(*kernel_arguments(model, factor * h_c, until_exit=True,
+                                                 sign_commit_fraction=0.0))
         assert full.event and info[INFO_EVENT]
         # The same steps up to the event, so the same event time to the last bit.
         assert info[INFO_T_EVENT] == full.event_time
@@ -93,9 +93,8 @@ def test_the_commit_rule_needs_its_fraction_below_the_fold(fraction):
     h_c = critical_height(scene, rtol=1e-5, model=model).critical_height
     flipped = 0
     for factor in (0.9999, 0.999, 0.995, 0.99):
-        args = list(kernel_arguments(model, factor * h_c, until_exit=True))
-        args[-1] = fraction
-        info = simulate_kernel(*args)
+        info = simulate_kernel(*kernel_arguments(model, factor * h_c, until_exit=True,
+                                                 sign_commit_fraction=fraction))
         flipped += bool(info[INFO_EVENT]) and info[INFO_T_EVENT] <= model.exit_time
     if fraction == SIGN_COMMIT_FRACTION:
         assert flipped == 0

@@ -31,6 +31,10 @@ the hottest HE cell passes the *runaway temperature* T_run, at which the adiabat
 nothing can quench it within the contact, and the event time is taken as the
 crossing time plus that induction time. The report's own criterion (fraction reacted
 above 0.99 in any cell) is checked too and ends the run if it comes first.
+
+Runs of one model at nearby heights can share their start (``prefix``, :data:`PREFIX_MAX_SCALE`):
+while the HE is cold and far below its melting step the discrete equations are linear in
+T - T0 and the flux scales with sqrt(H), so one run's recorded start, scaled, serves the others.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ __all__ = [
     "DEFAULT_RUNAWAY_FRACTION",
     "INFO_EVENT",
     "INFO_FAILED",
+    "INFO_RESUMED_STEPS",
     "INFO_FROZEN_WIDTH",
     "INFO_HISTORY_FULL",
     "INFO_NEWTON_FAILURES",
@@ -67,6 +72,11 @@ __all__ = [
     "SIGN_COMMIT_HEATING",
     "STEP_SAFETY",
     "HISTORY_CAPACITY",
+    "PREFIX_MAX_SCALE",
+    "PREFIX_STEPS",
+    "PREFIX_WRITE",
+    "PREFIX_RESUME",
+    "prefix_size",
     "adiabatic_induction_time",
     "runaway_temperature",
     "simulate_core",
@@ -88,7 +98,8 @@ INFO_NEWTON_FAILURES = 10  # steps rejected because Newton did not converge
 INFO_NEWTON_ITERATIONS = 11  # Newton iterations, all steps
 INFO_HISTORY_FULL = 12  # 1.0 when the exact target's flux history ran out of room
 INFO_FROZEN_WIDTH = 13  # 1.0 when the first HE cell's melting width was frozen (see kernel)
-INFO_SIZE = 14
+INFO_RESUMED_STEPS = 14  # accepted steps taken over from a linear prefix (0: run from t = 0)
+INFO_SIZE = 15
 
 # Ratio LTE / (corrector - quadratic predictor) of BDF2 at constant step:
 # BDF2 error -(2/9) h^3 y''', predictor error +h^3 y''' -> 2/11.
@@ -174,6 +185,31 @@ _SETTLED_Z = 12.0
 HISTORY_CAPACITY = 4096
 
 
+#: The linear prefix (``prefix`` of :func:`simulate_core`; docs/model.md, "Runs of one search
+#: share their linear start"). Until the hottest HE cell nears the cold-source cutoff (t_cold)
+#: and every HE cell lies far below the melting step, the discrete equations are linear in
+#: T - T0, and the flux of a model is q0(H) times a shape that does not depend on the height:
+#: a run at another height is the recorded one with T - T0 and the target's flux history
+#: scaled by the ratio of the flux amplitudes, a = q0 / q0_ref, on the recorded run's steps. A
+#: prefix is taken over for 1 / PREFIX_MAX_SCALE <= a <= PREFIX_MAX_SCALE (heights within a
+#: factor 1.1025 of the recorded one); each of its states stays in the linear regime at a up to
+#: PREFIX_MAX_SCALE. The recorded steps met the tolerance at a = 1; at a their local errors are
+#: a times theirs: at most 5 % above the tolerance.
+PREFIX_MAX_SCALE = 1.05
+#: Most accepted steps a prefix holds (the linear start takes ~25-50 at levels 0.5-1.5).
+PREFIX_STEPS = 160
+#: ``prefix_mode`` of :func:`simulate_core`: record the run's linear start into ``prefix``, or
+#: resume from the one it holds (0: neither).
+PREFIX_WRITE = 1
+PREFIX_RESUME = 2
+_NO_PREFIX = np.zeros(0)   # simulate_kernel's default: no prefix
+# Header of a prefix array: validity, the recording run's q0, its state's scalars and the
+# settings a resumed run must share with it.
+_PX_VALID, _PX_Q0, _PX_T, _PX_DT, _PX_DT_PREV, _PX_DT_PREV2, _PX_N_HIST, _PX_STEPS = range(8)
+_PX_Q_T_LAST, _PX_T_MAX, _PX_N, _PX_TOL, _PX_T_EXIT, _PX_T0, _PX_Q_EXT = range(8, 15)
+_PX_HEADER = 16
+
+
 #: Compilation options of this module's kernels. ``error_model="numpy"``: a division by zero
 #: gives inf or nan (which the integrator's finiteness checks reject) instead of a Python
 #: exception, so no division carries a zero test. ``fastmath={"contract"}``: LLVM may fuse a
@@ -181,6 +217,12 @@ HISTORY_CAPACITY = 4096
 #: fast-math assumption, so the inf and nan checks stay exact). Together 1.15x faster per
 #: simulation, measured side by side (docs/model.md, "Compiled kernels").
 _JIT = dict(cache=True, error_model="numpy", fastmath={"contract"})
+
+
+@njit(**_JIT)
+def prefix_size(n):
+    """Length of a prefix array for a mesh of ``n`` cells (:func:`simulate_core`)."""
+    return _PX_HEADER + 3 * n + 3 * PREFIX_STEPS + 1
 
 
 @njit(**_JIT, inline="always")
@@ -335,6 +377,65 @@ def _duhamel_history(t_new, hist_t, hist_ql, hist_qr, work, n_intervals):
 
 
 @njit(**_JIT)
+def _linear_at_scale(temp, width, rho_c, n, n_target, initial_temperature, scale, reactive,
+                     t_cold, latent_v, melting_point, melt_width, melt_spread, melt_z):
+    """Whether the state ``temp`` [K], with T - T0 scaled by ``scale``, leaves every HE cell in
+    the kernel's linear regime [bool]: below the cold-source cutoff ``t_cold`` (no reaction
+    source) and with its melting step's z = (T - T_m) / W (W spread over the scaled neighbour
+    difference, as :func:`_he_cell_enthalpy` takes it) below ``melt_z``."""
+    for i in range(n_target, n):
+        scaled = initial_temperature + scale * (temp[i] - initial_temperature)
+        if reactive and scaled >= t_cold:
+            return False
+        if latent_v > 0.0:
+            step_width = melt_width
+            if melt_spread > 0.0 and i < n - 1:
+                if i == 0:
+                    diff, ratio = _first_cell_range(temp, width)
+                else:
+                    diff = temp[i + 1] - temp[i - 1]
+                    ratio = width[i] / (0.5 * width[i - 1] + width[i] + 0.5 * width[i + 1])
+                _, step_width = _spread_width(scale * diff, ratio, melt_width, melt_spread)
+            if (scaled - melting_point) / step_width > melt_z:
+                return False
+    return True
+
+
+@njit(**_JIT)
+def _record_prefix(prefix, n, temp, temp_prev, temp_prev2, hist_t, hist_ql, hist_qr,
+                   exact_target, q0, t, dt, dt_prev, dt_prev2, n_hist, steps, q_t_last,
+                   t_max, tol_temperature, t_exit, initial_temperature, q_ext):
+    """Write an accepted state and what a resumed run must match into ``prefix``."""
+    base = _PX_HEADER
+    for i in range(n):
+        prefix[base + i] = temp[i]
+        prefix[base + n + i] = temp_prev[i]
+        prefix[base + 2 * n + i] = temp_prev2[i]
+    if exact_target:
+        base = _PX_HEADER + 3 * n
+        for j in range(steps + 1):
+            prefix[base + j] = hist_t[j]
+        for j in range(steps):
+            prefix[base + PREFIX_STEPS + 1 + j] = hist_ql[j]
+            prefix[base + 2 * PREFIX_STEPS + 1 + j] = hist_qr[j]
+    prefix[_PX_Q0] = q0
+    prefix[_PX_T] = t
+    prefix[_PX_DT] = dt
+    prefix[_PX_DT_PREV] = dt_prev
+    prefix[_PX_DT_PREV2] = dt_prev2
+    prefix[_PX_N_HIST] = n_hist
+    prefix[_PX_STEPS] = steps
+    prefix[_PX_Q_T_LAST] = q_t_last
+    prefix[_PX_T_MAX] = t_max
+    prefix[_PX_N] = n
+    prefix[_PX_TOL] = tol_temperature
+    prefix[_PX_T_EXIT] = t_exit
+    prefix[_PX_T0] = initial_temperature
+    prefix[_PX_Q_EXT] = q_ext
+    prefix[_PX_VALID] = 1.0
+
+
+@njit(**_JIT)
 def runaway_temperature(prefactor, activation_temperature, adiabatic_rise, time_scale,
                         fraction):
     """Temperature [K] at which the adiabatic induction time equals ``fraction * time_scale``.
@@ -374,7 +475,8 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                     q0, slide_s, slide_c, omega, t_exit, q_ext, t_end, t_stop,
                     initial_temperature, tol_temperature, dt_initial,
                     runaway_fraction, max_steps, record_t, record_tb, target_effusivity=0.0,
-                    he_conductivity=0.0, sign_commit_fraction=0.0):
+                    he_conductivity=0.0, sign_commit_fraction=0.0, prefix=_NO_PREFIX,
+                    prefix_mode=0):
     """Integrate one impact from t = 0 to an event or ``t_stop``.
 
     Parameters
@@ -443,6 +545,14 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
         :data:`SIGN_COMMIT_HEATING` of the adiabatic rate, by (1 - :data:`SIGN_COMMIT_GUARD`
         x this fraction) ``t_exit``; its event time is then the crossing plus that induction
         time, an early estimate (:data:`SIGN_COMMIT_FRACTION`).
+    prefix : ndarray, shape (prefix_size(n),)
+        A linear prefix (:data:`PREFIX_MAX_SCALE`): with ``prefix_mode`` :data:`PREFIX_WRITE`
+        the run records its linear start there (or marks it invalid); with
+        :data:`PREFIX_RESUME` it starts from the one recorded, scaled to its own flux, where
+        that applies (same mesh, tolerance, exit time, T0 and flux shape, flux amplitude within
+        PREFIX_MAX_SCALE, nothing recorded), else from t = 0.
+    prefix_mode : int
+        0 (default), :data:`PREFIX_WRITE` or :data:`PREFIX_RESUME`.
 
     Returns
     -------
@@ -466,7 +576,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                       np.empty(n), np.empty(n_he), np.empty(n), np.empty(n), info,
                       target_effusivity, he_conductivity, np.empty(capacity + 1),
                       np.empty(capacity), np.empty(capacity), np.empty(capacity + 1),
-                      sign_commit_fraction)
+                      sign_commit_fraction, prefix, prefix_mode)
         if info[INFO_HISTORY_FULL] == 0.0 or capacity >= max_steps:
             return info
         capacity = max_steps   # rare (far finer than level 3): run again, with room for every step
@@ -482,7 +592,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                   temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new,
                   y, y_prev, y_new, hist_h, hist_y, cp, dp, info,
                   target_effusivity, he_conductivity, hist_t, hist_ql, hist_qr, hist_work,
-                  sign_commit_fraction):
+                  sign_commit_fraction, prefix, prefix_mode):
     """:func:`simulate_kernel` on caller-owned storage, allocating nothing.
 
     The one integrator of both backends: the CPU wrapper :func:`simulate_kernel` allocates the
@@ -509,6 +619,9 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
     hist_ql, hist_qr : ndarray
         The exact target's flux [W/m^2] at the start and end of each accepted step; their
         length is the capacity: a run that needs more stops with ``INFO_HISTORY_FULL``.
+    prefix, prefix_mode : ndarray, int
+        The linear prefix and what to do with it (:func:`simulate_kernel`; mode 0 with any
+        array, e.g. a work array, leaves it alone).
     """
     n_he = n - n_target
     for k in range(INFO_SIZE):
@@ -616,6 +729,61 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
     # history restarts; its enthalpy then increases with T_0. A run that never gets there is
     # unchanged to the last bit.
     frozen_width = 0.0
+
+    # The linear prefix: record it (the run itself is unchanged), or start from it.
+    recording = prefix_mode == PREFIX_WRITE and prefix.shape[0] >= prefix_size(n)
+    melt_z = -math.inf
+    if recording:
+        prefix[_PX_VALID] = 0.0
+        if latent_v > 0.0:
+            # As t_cold for the reaction: the latent heat a cell below melt_z holds,
+            # L exp(2 z) / c [K], is under COLD_SOURCE_FRACTION of the step tolerance.
+            melt_z = 0.5 * math.log(COLD_SOURCE_FRACTION * tol_temperature * rho_c_he
+                                    / latent_v)
+    if (prefix_mode == PREFIX_RESUME and n_record == 0 and prefix.shape[0] >= prefix_size(n)
+            and prefix[_PX_VALID] == 1.0 and prefix[_PX_N] == n and prefix[_PX_T] < t_stop
+            and prefix[_PX_TOL] == tol_temperature and prefix[_PX_T_EXIT] == t_exit
+            and prefix[_PX_T0] == initial_temperature
+            and abs(q_ext * prefix[_PX_Q0] - prefix[_PX_Q_EXT] * q0)
+            <= 1e-12 * abs(q0 * prefix[_PX_Q0])
+            and (not exact_target or prefix[_PX_STEPS] <= capacity)):
+        scale = q0 / prefix[_PX_Q0]
+        if 1.0 / PREFIX_MAX_SCALE <= scale <= PREFIX_MAX_SCALE:
+            base = _PX_HEADER
+            for i in range(n):
+                temp[i] = initial_temperature + scale * (prefix[base + i] - initial_temperature)
+                temp_prev[i] = initial_temperature + scale * (
+                    prefix[base + n + i] - initial_temperature)
+                temp_prev2[i] = initial_temperature + scale * (
+                    prefix[base + 2 * n + i] - initial_temperature)
+            for i in range(n):
+                if i >= n_target:
+                    h[i], _, _, _ = _he_cell_enthalpy(i, n, n_target, temp, width, rho_c,
+                                                      latent_v, melting_point, melt_width,
+                                                      melt_spread)
+                    h_prev[i], _, _, _ = _he_cell_enthalpy(i, n, n_target, temp_prev, width,
+                                                           rho_c, latent_v, melting_point,
+                                                           melt_width, melt_spread)
+                else:
+                    h[i] = rho_c[i] * temp[i]
+                    h_prev[i] = rho_c[i] * temp_prev[i]
+            t = prefix[_PX_T]
+            dt = prefix[_PX_DT]
+            dt_prev = prefix[_PX_DT_PREV]
+            dt_prev2 = prefix[_PX_DT_PREV2]
+            n_hist = int(prefix[_PX_N_HIST])
+            steps = int(prefix[_PX_STEPS])
+            t_max_prev = initial_temperature + scale * (prefix[_PX_T_MAX] - initial_temperature)
+            info[INFO_T_MAX] = t_max_prev
+            info[INFO_RESUMED_STEPS] = steps
+            if exact_target:
+                q_t_last = scale * prefix[_PX_Q_T_LAST]
+                base = _PX_HEADER + 3 * n
+                for j in range(steps + 1):
+                    hist_t[j] = prefix[base + j]
+                for j in range(steps):
+                    hist_ql[j] = scale * prefix[base + PREFIX_STEPS + 1 + j]
+                    hist_qr[j] = scale * prefix[base + 2 * PREFIX_STEPS + 1 + j]
 
     while t < t_stop and steps + rejected < max_steps:
         # Land exactly on t_exit (flux kink or jump) and on t_stop, stretching the step
@@ -883,6 +1051,17 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                                              omega, t_exit, q_ext)) > 1e-6 * abs(q0):
             n_hist = 0
             dt = dt_initial
+        if recording:
+            # Still linear at every height the prefix may serve: record this state (every
+            # earlier one was too); else the prefix ends at the last one recorded.
+            recording = steps <= PREFIX_STEPS and _linear_at_scale(
+                temp, width, rho_c, n, n_target, initial_temperature, PREFIX_MAX_SCALE,
+                reactive, t_cold, latent_v, melting_point, melt_width, melt_spread, melt_z)
+            if recording:
+                _record_prefix(prefix, n, temp, temp_prev, temp_prev2, hist_t, hist_ql,
+                               hist_qr, exact_target, q0, t, dt, dt_prev, dt_prev2, n_hist,
+                               steps, q_t_last, t_max_prev, tol_temperature, t_exit,
+                               initial_temperature, q_ext)
 
     info[INFO_STEPS] = steps
     info[INFO_REJECTED] = rejected

@@ -156,7 +156,8 @@ def _margin(x, row, sc, n_cells, share, tol_temperature, melt_width, work, info)
                   tol_temperature, 1e-6 * sc[_S_T_EXIT], sc[_S_RUNAWAY], MAX_STEPS, work[0],
                   work[0], 0, work[0], work[1], work[2], work[3], work[4], work[5], work[6],
                   work[7], work[8], work[9], work[10], work[11], work[12], work[13], info,
-                  0.0, 0.0, work[0], work[0], work[0], work[0], 0.0)  # the meshed target
+                  0.0, 0.0, work[0], work[0], work[0], work[0], 0.0,  # the meshed target
+                  work[0], 0)  # no linear prefix
     horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
     if info[INFO_FAILED] > 0.0 or (info[INFO_STEPS] + info[INFO_REJECTED] >= MAX_STEPS
                                    and not info[INFO_EVENT] > 0.0):

@@ -13,16 +13,22 @@ from skidmc.physics.thermal import (
     INFO_FAILED,
     INFO_NEWTON_ITERATIONS,
     INFO_REJECTED,
+    INFO_RESUMED_STEPS,
     INFO_STEPS,
     INFO_T_EVENT,
     INFO_T_EXIT_MAX,
     INFO_T_MAX,
     INFO_Y_EXIT_MAX,
+    PREFIX_MAX_SCALE,
+    PREFIX_RESUME,
+    PREFIX_WRITE,
     SIGN_COMMIT_FRACTION,
+    prefix_size,
     simulate_kernel,
 )
 
-__all__ = ["MAX_STEPS", "Simulation", "SolverError", "kernel_arguments", "simulate"]
+__all__ = ["MAX_STEPS", "LinearPrefix", "Simulation", "SolverError", "kernel_arguments",
+           "simulate"]
 
 MAX_STEPS = 200_000
 
@@ -46,15 +52,48 @@ class Simulation:
     exit_max_temperature: float  # highest HE cell temperature at t_exit [K]
     exit_max_reacted: float  # highest fraction reacted at t_exit [1]
     newton_iterations: int = 0  # Newton iterations over all step attempts (a run's cost)
+    resumed_steps: int = 0   # accepted steps taken over from a linear prefix (LinearPrefix)
     times: np.ndarray | None = None                  # [s]
     interface_temperature: np.ndarray | None = None  # [K]
 
 
+class LinearPrefix:
+    """The linear start that the runs of one model at nearby heights share.
+
+    Until the hottest HE cell nears the cold-source cutoff and every HE cell lies far below
+    the melting step, a run's discrete equations are linear in T - T0, and its flux is
+    q0(H) ~ sqrt(H) times a shape that does not depend on H: the run at another height is the
+    first one's start with T - T0 and the target's flux history scaled by the ratio of flux
+    amplitudes (:data:`skidmc.physics.thermal.PREFIX_MAX_SCALE`). The first run given this
+    object (:func:`simulate` ``prefix=``) records its start; each later run of the same model
+    within the scale resumes from it, skipping ~10-15 % of its time (docs/model.md, "Runs of
+    one search share their linear start"). A later run is then the first run's steps up to
+    the prefix's end, not its own: its result differs from a run from t = 0 by the step
+    sequence's error (a few 1e-5 in the margin at level 0.5, far below the level's error).
+    """
+
+    def __init__(self, model):
+        self.array = np.zeros(prefix_size(model.width.shape[0]))
+        self.recorded_height = None   # [m]: the height of the run that recorded it
+
+    def mode(self, height):
+        """The kernel's ``prefix_mode`` for a run at ``height`` [m]."""
+        if self.recorded_height is None:
+            return PREFIX_WRITE
+        scale = math.sqrt(height / self.recorded_height)
+        return PREFIX_RESUME if 1.0 / PREFIX_MAX_SCALE <= scale <= PREFIX_MAX_SCALE else 0
+
+
 def kernel_arguments(model, height, *, max_steps=MAX_STEPS, flux_override=None,
-                     until_exit=False, record_t=None, record_tb=None):
+                     until_exit=False, record_t=None, record_tb=None, prefix=None,
+                     prefix_mode=0, sign_commit_fraction=None):
     """The arguments of :func:`skidmc.physics.thermal.simulate_kernel` for ``model`` at
     ``height`` [m], in its order (see :func:`simulate` for the keywords; ``record_t``,
-    ``record_tb``: the recording arrays, empty when None)."""
+    ``record_tb``: the recording arrays, empty when None; ``prefix``: the linear prefix's
+    array, ``prefix_mode`` what the kernel does with it; ``sign_commit_fraction``: the
+    commit rule's fraction, by default SIGN_COMMIT_FRACTION with ``until_exit``, else 0)."""
+    if sign_commit_fraction is None:
+        sign_commit_fraction = SIGN_COMMIT_FRACTION if until_exit else 0.0
     if flux_override is None:
         q0 = model.flux_amplitude(height)
         flux = (q0, model.slide_s, model.slide_c, model.omega, model.exit_time,
@@ -72,11 +111,11 @@ def kernel_arguments(model, height, *, max_steps=MAX_STEPS, flux_override=None,
             model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
             model.runaway_fraction, max_steps, record_t, record_tb,
             model.target_effusivity, model.he_conductivity,
-            SIGN_COMMIT_FRACTION if until_exit else 0.0)
+            sign_commit_fraction, np.zeros(0) if prefix is None else prefix, prefix_mode)
 
 
 def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=None,
-             until_exit=False):
+             until_exit=False, prefix=None):
     """Simulate the impact from drop height ``height`` [m].
 
     Parameters
@@ -99,6 +138,10 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
         its sign is the full run's, its margin an estimate a little below the full run's
         (3e-4 on paper-gold; the guard leaves runs whose event comes within 0.3 % of the exit
         to the plain rule, so a root's neighbours keep their exact values).
+    prefix : LinearPrefix, optional
+        Share the linear start with the other runs of ``model`` given the same object: the
+        first records it, later ones within its scale start from it. Not with ``record`` or
+        ``flux_override`` (those runs start at t = 0 and leave it alone).
 
     Returns
     -------
@@ -107,10 +150,16 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
     n_rec = max_steps if record else 0
     rec_t = np.zeros(min(n_rec, 100_000))
     rec_tb = np.zeros_like(rec_t)
+    use_prefix = prefix is not None and not record and flux_override is None
+    mode = prefix.mode(height) if use_prefix else 0
     info = simulate_kernel(*kernel_arguments(model, height, max_steps=max_steps,
                                              flux_override=flux_override,
                                              until_exit=until_exit, record_t=rec_t,
-                                             record_tb=rec_tb))
+                                             record_tb=rec_tb,
+                                             prefix=prefix.array if use_prefix else None,
+                                             prefix_mode=mode))
+    if mode == PREFIX_WRITE and prefix.array[0] == 1.0:
+        prefix.recorded_height = float(height)
     if info[INFO_FAILED] or (info[INFO_STEPS] + info[INFO_REJECTED] >= max_steps
                              and not info[INFO_EVENT]):
         raise SolverError(
@@ -128,6 +177,7 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
         exit_max_temperature=float(info[INFO_T_EXIT_MAX]),
         exit_max_reacted=float(info[INFO_Y_EXIT_MAX]),
         newton_iterations=int(info[INFO_NEWTON_ITERATIONS]),
+        resumed_steps=int(info[INFO_RESUMED_STEPS]),
     )
     if record:
         n = min(steps, rec_t.shape[0])
