@@ -294,7 +294,10 @@ def test_go_side_root_gives_up_on_a_margin_that_is_not_monotone():
 def test_go_side_search_agrees_with_bisection_on_the_same_mesh(name):
     # Same model (level 0.5), two root finders: they must agree within their tolerances
     # (x_tol = 0.2 rtol on ln H each; bisection ends inside a bracket of x_tol). From the fast
-    # tier's guess (0.1-0.3 % off on these presets) the go-side search needs 2-3 simulations.
+    # tier's guess (0.1-0.3 % off on these presets) the go-side search needs 3-5 simulations:
+    # whether its third lands within 4 x_tol of the root turns on the level's step noise (a
+    # few 1e-4 in the margin; alumina-rough took 4 before its runs shared their linear start,
+    # 5 after: docs/model.md, "Runs of one search share their linear start"). Bisection 10+.
     from skidmc.solver.model import build_model
 
     scene = get_preset(name)
@@ -304,7 +307,7 @@ def test_go_side_search_agrees_with_bisection_on_the_same_mesh(name):
     go = critical_height(scene, rtol=rtol, model=model, h_guess=guess)
     bisect = critical_height(scene, rtol=rtol, model=model, method="bisection")
     assert abs(math.log(go.critical_height / bisect.critical_height)) < 0.4 * rtol
-    assert go.evaluations <= 4 < bisect.evaluations
+    assert go.evaluations <= 5 < bisect.evaluations
 
 
 def _jump_margin(root, nogo=0.12, go_at_root=-0.28):

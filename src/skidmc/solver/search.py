@@ -58,7 +58,7 @@ from skidmc.solver.roots import (
     margin_slope,
     prior_bisection_root,
 )
-from skidmc.solver.simulate import simulate
+from skidmc.solver.simulate import LinearPrefix, simulate
 
 __all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "FADING_EXIT_SPEED",
            "FADING_FAST_SHIFT", "FADING_FAST_SPREAD", "FAST_STOPS_SLIDING_SPREAD",
@@ -591,10 +591,12 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     signs_only = method == "brent" and h_guess is not None and (
         model.exit_kind != "rebound" or jumped or fading)
     sign_only_points = set()
+    # The search's runs share their linear start (the first run records it).
+    prefix = LinearPrefix(model)
 
     def margin(x):
         if x not in cache:
-            sim = simulate(model, math.exp(x), until_exit=signs_only)
+            sim = simulate(model, math.exp(x), until_exit=signs_only, prefix=prefix)
             cache[x] = sim.margin
             if signs_only and not sim.event:
                 sign_only_points.add(x)
