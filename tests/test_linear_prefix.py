@@ -93,7 +93,11 @@ def test_heights_outside_the_scale_and_other_models_start_at_zero(recorded):
     assert prefix.mode(far) == 0
     run = simulate(model, far, prefix=prefix)
     assert run.resumed_steps == 0 and run.margin == simulate(model, far).margin
-    # Another level (another mesh): the kernel refuses the prefix and runs from t = 0.
+    # Another model, even an identical one: simulate leaves the prefix alone.
+    twin = build_model(get_preset("paper-quartz"), level=0.5, melt_width=1.0, melt_spread=1.0,
+                       target="exact")
+    assert simulate(twin, height, prefix=prefix).resumed_steps == 0
+    # Another level (another mesh): the kernel itself refuses the prefix, runs from t = 0.
     finer = build_model(get_preset("paper-quartz"), level=1.5, melt_width=1.0, melt_spread=1.0,
                         target="exact")
     args = list(kernel_arguments(finer, height, prefix=prefix.array, prefix_mode=2))

@@ -73,6 +73,7 @@ class LinearPrefix:
     """
 
     def __init__(self, model):
+        self.model = model            # the one model whose runs may use it
         self.array = np.zeros(prefix_size(model.width.shape[0]))
         self.recorded_height = None   # [m]: the height of the run that recorded it
 
@@ -140,8 +141,9 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
         to the plain rule, so a root's neighbours keep their exact values).
     prefix : LinearPrefix, optional
         Share the linear start with the other runs of ``model`` given the same object: the
-        first records it, later ones within its scale start from it. Not with ``record`` or
-        ``flux_override`` (those runs start at t = 0 and leave it alone).
+        first records it, later ones within its scale start from it. Not with ``record``,
+        ``flux_override`` or another model than the prefix's (those runs start at t = 0 and
+        leave it alone).
 
     Returns
     -------
@@ -150,7 +152,8 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
     n_rec = max_steps if record else 0
     rec_t = np.zeros(min(n_rec, 100_000))
     rec_tb = np.zeros_like(rec_t)
-    use_prefix = prefix is not None and not record and flux_override is None
+    use_prefix = (prefix is not None and prefix.model is model and not record
+                  and flux_override is None)
     mode = prefix.mode(height) if use_prefix else 0
     info = simulate_kernel(*kernel_arguments(model, height, max_steps=max_steps,
                                              flux_override=flux_override,
