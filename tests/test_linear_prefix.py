@@ -10,18 +10,20 @@ import numpy as np
 import pytest
 
 from skidmc.physics.thermal import (
+    _PX_STEPS,
+    _PX_T,
+    _PX_T_MAX,
+    _PX_VALID,
     INFO_STEPS,
     INFO_T_MAX,
     PREFIX_MAX_SCALE,
+    PREFIX_RESUME,
     simulate_kernel,
 )
 from skidmc.scene import get_preset
 from skidmc.solver import critical_height
 from skidmc.solver.model import build_model
 from skidmc.solver.simulate import LinearPrefix, kernel_arguments, simulate
-
-# Header slots of a prefix array (skidmc.physics.thermal._PX_*): valid, q0, t, ..., steps, t_max.
-_VALID, _Q0, _T, _STEPS, _T_MAX = 0, 1, 2, 7, 9
 
 
 @pytest.fixture(scope="module", params=["paper-quartz", "paper-gold"])
@@ -41,7 +43,7 @@ def test_recording_leaves_the_run_unchanged(recorded):
     prefix = LinearPrefix(model)
     with_prefix = simulate(model, height, prefix=prefix)
     plain = simulate(model, height)
-    assert prefix.array[_VALID] == 1.0 and prefix.recorded_height == height
+    assert prefix.array[_PX_VALID] == 1.0 and prefix.recorded_height == height
     assert with_prefix.margin == plain.margin
     assert with_prefix.steps == plain.steps
     assert with_prefix.newton_iterations == plain.newton_iterations
@@ -50,12 +52,12 @@ def test_recording_leaves_the_run_unchanged(recorded):
 
 def test_prefix_ends_in_the_linear_start_before_the_exit(recorded):
     model, _, prefix = recorded
-    steps = int(prefix.array[_STEPS])
+    steps = int(prefix.array[_PX_STEPS])
     # ~25-60 steps; the hottest cell below the cold-source cutoff (~450-470 K here) and far
     # below the melting point (553 K), which is what lets it scale.
     assert 10 <= steps
-    assert prefix.array[_T] < 0.3 * model.exit_time
-    assert prefix.array[_T_MAX] < model.melting_point - 50.0
+    assert prefix.array[_PX_T] < 0.3 * model.exit_time
+    assert prefix.array[_PX_T_MAX] < model.melting_point - 50.0
 
 
 @pytest.mark.parametrize("scale", [1.0 / PREFIX_MAX_SCALE, 1.03, PREFIX_MAX_SCALE])
@@ -68,11 +70,11 @@ def test_prefix_is_the_run_at_another_height_with_its_steps(recorded, scale):
     other = height * scale**2
     args = list(kernel_arguments(model, other))
     args[22] = model.resolution.tol_temperature * scale      # tol_temperature
-    args[20] = prefix.array[_T]                              # t_stop: the prefix's end
+    args[20] = prefix.array[_PX_T]                              # t_stop: the prefix's end
     info = simulate_kernel(*args)
     t0 = model.initial_temperature
-    expected = t0 + scale * (prefix.array[_T_MAX] - t0)
-    assert info[INFO_STEPS] == prefix.array[_STEPS]
+    expected = t0 + scale * (prefix.array[_PX_T_MAX] - t0)
+    assert info[INFO_STEPS] == prefix.array[_PX_STEPS]
     # Relative to the rise T - T0 (~150 K): rounding of ~50 steps' sums, 1e-12 each.
     assert abs(info[INFO_T_MAX] - expected) <= 1e-9 * (expected - t0)
 
@@ -81,7 +83,7 @@ def test_resumed_run_at_the_recorded_height_is_the_run(recorded):
     model, height, prefix = recorded
     resumed = simulate(model, height, prefix=prefix)
     plain = simulate(model, height)
-    assert resumed.resumed_steps == prefix.array[_STEPS] > 0
+    assert resumed.resumed_steps == prefix.array[_PX_STEPS] > 0
     assert resumed.newton_iterations < plain.newton_iterations
     # T0 + 1 x (T - T0) rounds differently from T by an ulp; nothing else differs.
     assert resumed.margin == pytest.approx(plain.margin, abs=1e-9)
@@ -100,7 +102,8 @@ def test_heights_outside_the_scale_and_other_models_start_at_zero(recorded):
     # Another level (another mesh): the kernel itself refuses the prefix, runs from t = 0.
     finer = build_model(get_preset("paper-quartz"), level=1.5, melt_width=1.0, melt_spread=1.0,
                         target="exact")
-    args = list(kernel_arguments(finer, height, prefix=prefix.array, prefix_mode=2))
+    args = list(kernel_arguments(finer, height, prefix=prefix.array,
+                                      prefix_mode=PREFIX_RESUME))
     plain = simulate_kernel(*kernel_arguments(finer, height))
     assert np.array_equal(simulate_kernel(*args), plain, equal_nan=True)
 

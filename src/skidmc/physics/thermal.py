@@ -377,8 +377,8 @@ def _duhamel_history(t_new, hist_t, hist_ql, hist_qr, work, n_intervals):
 
 
 @njit(**_JIT)
-def _linear_at_scale(temp, width, rho_c, n, n_target, initial_temperature, scale, reactive,
-                     t_cold, latent_v, melting_point, melt_width, melt_spread, melt_z):
+def _linear_at_scale(temp, width, n, n_target, initial_temperature, scale, reactive, t_cold,
+                     latent_v, melting_point, melt_width, melt_spread, melt_z):
     """Whether the state ``temp`` [K], with T - T0 scaled by ``scale``, leaves every HE cell in
     the kernel's linear regime [bool]: below the cold-source cutoff ``t_cold`` (no reaction
     source) and with its melting step's z = (T - T_m) / W (W spread over the scaled neighbour
@@ -1055,8 +1055,8 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
             # Still linear at every height the prefix may serve: record this state (every
             # earlier one was too); else the prefix ends at the last one recorded.
             recording = steps <= PREFIX_STEPS and _linear_at_scale(
-                temp, width, rho_c, n, n_target, initial_temperature, PREFIX_MAX_SCALE,
-                reactive, t_cold, latent_v, melting_point, melt_width, melt_spread, melt_z)
+                temp, width, n, n_target, initial_temperature, PREFIX_MAX_SCALE, reactive,
+                t_cold, latent_v, melting_point, melt_width, melt_spread, melt_z)
             if recording:
                 _record_prefix(prefix, n, temp, temp_prev, temp_prev2, hist_t, hist_ql,
                                hist_qr, exact_target, q0, t, dt, dt_prev, dt_prev2, n_hist,

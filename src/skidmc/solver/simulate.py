@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from skidmc.physics.thermal import (
+    _PX_VALID,
     INFO_EVENT,
     INFO_FAILED,
     INFO_NEWTON_ITERATIONS,
@@ -68,8 +69,9 @@ class LinearPrefix:
     object (:func:`simulate` ``prefix=``) records its start; each later run of the same model
     within the scale resumes from it, skipping ~10-15 % of its time (docs/model.md, "Runs of
     one search share their linear start"). A later run is then the first run's steps up to
-    the prefix's end, not its own: its result differs from a run from t = 0 by the step
-    sequence's error (a few 1e-5 in the margin at level 0.5, far below the level's error).
+    the prefix's end, not its own: its margin differs from a run from t = 0 by the step
+    sequence's error, a few 1e-6 to 1e-5 on the presets and up to ~2e-3 where a later step is
+    added or rejected, as large as the margin's own jumps between nearby heights at level 0.5.
     """
 
     def __init__(self, model):
@@ -161,7 +163,7 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
                                              record_tb=rec_tb,
                                              prefix=prefix.array if use_prefix else None,
                                              prefix_mode=mode))
-    if mode == PREFIX_WRITE and prefix.array[0] == 1.0:
+    if mode == PREFIX_WRITE and prefix.array[_PX_VALID] == 1.0:
         prefix.recorded_height = float(height)
     if info[INFO_FAILED] or (info[INFO_STEPS] + info[INFO_REJECTED] >= max_steps
                              and not info[INFO_EVENT]):
