@@ -405,7 +405,11 @@ def _linear_at_scale(temp, width, n, n_target, initial_temperature, scale, react
 def _record_prefix(prefix, n, temp, temp_prev, temp_prev2, hist_t, hist_ql, hist_qr,
                    exact_target, q0, t, dt, dt_prev, dt_prev2, n_hist, steps, q_t_last,
                    t_max, tol_temperature, t_exit, initial_temperature, q_ext):
-    """Write an accepted state and what a resumed run must match into ``prefix``."""
+    """Write an accepted state and what a resumed run must match into ``prefix``.
+
+    Called on every accepted step from the first (:func:`simulate_core`), and the exact
+    target's flux history only grows: only the newest step's entries of it are copied.
+    """
     base = _PX_HEADER
     for i in range(n):
         prefix[base + i] = temp[i]
@@ -413,11 +417,11 @@ def _record_prefix(prefix, n, temp, temp_prev, temp_prev2, hist_t, hist_ql, hist
         prefix[base + 2 * n + i] = temp_prev2[i]
     if exact_target:
         base = _PX_HEADER + 3 * n
-        for j in range(steps + 1):
-            prefix[base + j] = hist_t[j]
-        for j in range(steps):
-            prefix[base + PREFIX_STEPS + 1 + j] = hist_ql[j]
-            prefix[base + 2 * PREFIX_STEPS + 1 + j] = hist_qr[j]
+        if steps == 1:
+            prefix[base] = hist_t[0]
+        prefix[base + steps] = hist_t[steps]
+        prefix[base + PREFIX_STEPS + steps] = hist_ql[steps - 1]
+        prefix[base + 2 * PREFIX_STEPS + steps] = hist_qr[steps - 1]
     prefix[_PX_Q0] = q0
     prefix[_PX_T] = t
     prefix[_PX_DT] = dt
