@@ -494,3 +494,63 @@ def test_go_curve_band_covers_the_true_cdf_simultaneously(censor):
     print(f"simultaneous coverage {coverage:.3f}")
     # DKW with Massart's constant is conservative: coverage >= nominal up to sampling error
     assert coverage > 0.95 - 3 * math.sqrt(0.95 * 0.05 / reps)
+
+
+# ---------------------------------------------------------------------------------------------
+# bound searches never raise (issue 41)
+
+# An ordinary 26-drop up-down sequence (median 2 ft, sigma 0.1 in log10, step 0.5 sigma) on which
+# quantile(0.5) raised OverflowError: the profile's limit as H50 -> inf lies 0.0034 below the
+# chi-square level, and the search passed the slope floor and found a spurious crossing.
+OPEN_HEIGHTS = [2.825075, 2.517851, 2.825075, 2.517851, 2.244037, 2.0, 1.782502, 1.588656,
+                1.415892, 1.588656, 1.782502, 2.0, 1.782502, 2.0, 1.782502, 1.588656, 1.782502,
+                1.588656, 1.782502, 2.0, 2.244037, 2.517851, 2.244037, 2.517851, 2.825075,
+                2.517851]
+OPEN_WENT = [1, 0, 1, 1, 1, 1, 1, 1, 0, 0, 0, 1, 0, 1, 1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 1, 1]
+
+
+def test_open_bound_is_inf_not_an_overflow():
+    fit = fit_probit(OPEN_HEIGHTS, OPEN_WENT)
+    went = np.array(OPEN_WENT, bool)
+    # the constant-probability limits of the profile, computed here from the binomial likelihood
+    for p_limit in (0.5, went.mean()):
+        limit = stats.binom.logpmf(went.sum(), went.size, p_limit)
+        # log-likelihood of the data in a sequence (no binomial coefficient) at constant p
+        limit -= math.log(math.comb(went.size, int(went.sum())))
+        assert 2.0 * (fit.loglik - limit) < CHI2_95  # so both sides are open for H50
+    estimate, low, high = fit.quantile(0.5)
+    assert 1.5 < estimate < 2.5
+    assert (low, high) == (0.0, math.inf)
+
+
+def _no_bound_search_raises(n_sequences, seed):
+    rng = np.random.default_rng(seed)
+    sigma = 0.1 * math.log(10.0)
+    n_fits = n_open = 0
+    for _ in range(n_sequences):
+        n = int(rng.integers(6, 41))
+        step = sigma * rng.choice([0.25, 0.5, 1.0, 2.0])
+        heights, went = simulate_updown(rng, n, math.log(2.0), sigma, step,
+                                        math.log(2.0) + sigma * rng.normal())
+        heights = np.round(heights, int(rng.integers(3, 7)))
+        if went.all() or not went.any():
+            continue
+        fit = fit_probit(heights, went)
+        n_fits += 1
+        for p in (0.01, 0.5, 0.9):
+            estimate, low, high = fit.quantile(p)  # must not raise
+            assert not (low > high), (p, low, high)
+            n_open += high == math.inf
+        s_low, s_high = fit.sigma_interval()
+        assert not (s_low > s_high)
+    assert n_open > 0  # the sample does reach open bounds, the case that used to raise
+    return n_fits
+
+
+def test_no_bound_search_raises_on_simulated_sequences():
+    assert _no_bound_search_raises(150, seed=41) > 100
+
+
+@pytest.mark.slow
+def test_no_bound_search_raises_on_thousands_of_simulated_sequences():
+    assert _no_bound_search_raises(3000, seed=4141) > 2000

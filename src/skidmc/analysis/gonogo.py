@@ -281,7 +281,17 @@ class _NormalLikelihood:
         result = optimize.minimize_scalar(
             negative, bounds=_LOG_SLOPE_BOUNDS, method="bounded", options={"xatol": 1e-7}
         )
-        return -float(result.fun)
+        best = -float(result.fun)
+        if not self.n_exact:
+            # Censored data only: as b -> 0 every drop's probability tends to Phi(z), a value
+            # the supremum always includes. Far from the data the bounded search can stop
+            # short of it (the slope floor, or a flat objective), and the profile would then
+            # fall spuriously and close an interval that is open (issue 41's 26-drop sequence).
+            flat = self.below.size * float(special.log_ndtr(z)) + self.above.size * float(
+                special.log_ndtr(-z)
+            )
+            best = max(best, flat)
+        return best
 
     def profile_sigma(self, sigma: float, a_start: float) -> float:
         """max over a of the log-likelihood with sigma (standardised) fixed: concave in a."""
@@ -399,7 +409,14 @@ class _LogNormalResponse:
             low, _ = _search_bound(excess, start, 0.1, -1.0, open_limit=False)
         # beyond sigma = e^40 (standardised) the likelihood is flat to machine precision
         high, why = _search_bound(excess, start, 0.1, +1.0, open_limit=open_high, open_after=40.0)
-        return math.exp(low), (math.exp(high) if math.isfinite(high) else math.inf), why
+        return _exp_or_inf(low), _exp_or_inf(high), why
+
+
+def _exp_or_inf(log_value: float) -> float:
+    """exp(log_value), inf beyond the double range (an open side, never an OverflowError)."""
+    if math.isnan(log_value):
+        return math.nan
+    return math.exp(log_value) if log_value < 709.0 else math.inf
 
 
 def _quantile_result(model: _NormalLikelihood, q_std: float, low_std: float, high_std: float):
@@ -410,7 +427,9 @@ def _quantile_result(model: _NormalLikelihood, q_std: float, low_std: float, hig
             return 0.0
         if v == math.inf:
             return math.inf
-        return math.exp(model.to_log_height(v)) if math.isfinite(v) else math.nan
+        if not math.isfinite(v):
+            return math.nan
+        return _exp_or_inf(model.to_log_height(v))
 
     return height(q_std), height(low_std), height(high_std)
 
