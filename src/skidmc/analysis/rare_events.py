@@ -58,6 +58,26 @@ _STRAY_MARGIN = 2.0
 # branch spreads its failures over about +-35 deg at one unit beyond its design point).
 _BRANCH_ANGLE_DEG = 45.0
 
+# Curvature check of form-is. Near a design point at distance beta with a principal curvature
+# kappa of the limit state (positive where the failure domain wraps back toward the origin), the
+# weights phi(u)/q(u) of a unit-normal proposal centred there grow like exp(beta kappa t^2 / 2)
+# along the tangent coordinate t ~ N(0, 1): their tail is Pareto with index k = beta kappa. The
+# variance of the weights is infinite from k = 1/2 and the variance of the sample variance (from
+# which the CoV is stated) from k = 1/4; above that the stated CoV is not to be trusted.
+_CURVATURE_K_LIMIT = 0.25
+# Step [U units] of the central differences of the curvature: the scale of the proposal's spread
+# (unit variance), where the curvature decides the weights.
+_CURVATURE_STEP = 0.5
+
+# Generalised-Pareto shape of the largest IS weights above which their variance is infinite
+# (Vehtari, Simpson, Gelman, Yao & Gabry 2024, "Pareto smoothed importance sampling", JMLR 25:72:
+# k > 0.5 infinite variance, k > 0.7 not even the smoothed estimate is reliable).
+_PARETO_K_LIMIT = 0.5
+
+# Kish's effective sample size of the failures' weights, as a fraction of the failure count,
+# below which a handful of samples carries the estimate.
+_ESS_FRACTION_LIMIT = 0.1
+
 
 def _bad(name: str, value: object, reason: str) -> ValueError:
     """A ValueError in skidmc's style: ``"{name} = {value!r}: {reason}"``."""
@@ -501,8 +521,12 @@ def _subset_run(limit_state, rng, run, samples_per_level, p0, budget, proposal_s
                 "evaluations": limit_state.evaluations - start,
                 "reason": "reached g <= 0",
             }
-        order = np.argsort(values, kind="stable")
-        # Au & Beck: the threshold halfway between the p0 N-th and the next smallest g.
+        # Ties are broken at random (an independent uniform key per sample): a rejected
+        # Metropolis move repeats its chain's state, so equal g values are common, and which
+        # copies become seeds must not depend on where they sit in the chains.
+        order = np.lexsort((rng.random(values.size), values))
+        # Au & Beck: the threshold halfway between the p0 N-th and the next smallest g (the
+        # tied value itself when they are equal).
         new_threshold = 0.5 * (values[order[seeds_per_level - 1]] + values[order[seeds_per_level]])
         if not new_threshold < threshold:
             return {
@@ -517,8 +541,13 @@ def _subset_run(limit_state, rng, run, samples_per_level, p0, budget, proposal_s
                 f"{new_threshold:.6g} (g flat or infinite on the samples)",
             }
         threshold = new_threshold
-        below = values <= threshold
-        conditional = below.mean()
+        # The level's conditional probability is p0 by construction (Au & Beck 2001, Sec. 5): the
+        # p0 N seeds are the samples of lowest g. Counting mean(values <= threshold) instead
+        # adds every tied copy at the threshold and biased P high (+9 % at P = 2.9e-7 on the
+        # 10-d linear state, see docs/rare-events.md).
+        below = np.zeros(values.size, dtype=bool)
+        below[order[:seeds_per_level]] = True
+        conditional = seeds_per_level / samples_per_level
         gamma = (
             0.0 if chain_shape is None else _chain_correlation_factor(below.reshape(chain_shape))
         )
@@ -701,7 +730,7 @@ def _subset_simulation(
 # --------------------------------------------------------------------------------------------
 
 
-def _design_point(limit_state, start, gradient_step, scale):
+def _design_point(limit_state, start, gradient_step, scale, bounds=None):
     """Nearest point of g = 0 to the origin of U space, by SLSQP.
 
     The constraint's gradient is a forward difference whose d + 1 rows go to g in one call;
@@ -737,6 +766,7 @@ def _design_point(limit_state, start, gradient_step, scale):
             # ftol 1e-6 of 0.5 beta^2 (5-20 for rare events) pins beta far below the
             # finite-difference error; tighter, SLSQP spends its iterations chasing that error.
             options={"maxiter": 100, "ftol": 1e-6},
+            bounds=bounds,
         )
     u_star = np.asarray(result.x, dtype=float)
     value = value_and_gradient(u_star)[0] if np.all(np.isfinite(u_star)) else math.nan
@@ -745,11 +775,111 @@ def _design_point(limit_state, start, gradient_step, scale):
     return u_star, ok, result.message
 
 
+def _branch_point(limit_state, start, gradient_step, scale):
+    """A design point of a further branch, or None.
+
+    The IS proposal only has to sit near a branch, not on its exact design point: a search that
+    stops short (SLSQP at a kink of a series or parallel system, where the constraint is not
+    differentiable) still yields a usable centre when it ends within 5 % of g's scale of g = 0.
+    """
+    surface = _surface_start(limit_state, start)
+    # Kept within a box around the start (half-width half its distance from the origin, at
+    # least one unit): without it SLSQP often jumps to the nearest point of a branch already
+    # known, which is where the constraint is met at least cost.
+    half = max(1.0, 0.5 * float(np.linalg.norm(surface)))
+    bounds = optimize.Bounds(surface - half, surface + half)
+    u_new, ok_new, _ = _design_point(limit_state, surface, gradient_step, scale, bounds)
+    if ok_new:
+        return u_new
+    if np.all(np.isfinite(u_new)):
+        value = float(limit_state(u_new[np.newaxis])[0]) / scale
+        if abs(value) <= 0.05:
+            return u_new
+    return None
+
+
+def _surface_start(limit_state, point: np.ndarray, points_on_ray: int = 20) -> np.ndarray:
+    """Where the ray from the origin to a failure point first reaches g <= 0 (one call of g).
+
+    A design point search started far out on a branch can jump to another branch (SLSQP's
+    equality constraint is met anywhere on g = 0); started on the surface near the failure's own
+    branch it stays there. Linear interpolation between the last safe and the first failed of
+    `points_on_ray` equally spaced points; the failure point itself when the ray fails at once.
+    """
+    fractions = np.arange(1, points_on_ray + 1) / points_on_ray
+    values = limit_state(fractions[:, None] * point[None, :])
+    failed = np.flatnonzero(values <= 0)
+    if not failed.size or failed[0] == 0:
+        return point
+    i = failed[0]
+    g_safe, g_fail = values[i - 1], values[i]
+    share = g_safe / (g_safe - g_fail) if math.isfinite(g_safe - g_fail) else 0.5
+    return (fractions[i - 1] + share * (fractions[i] - fractions[i - 1])) * point
+
+
 def _angle_cosines(directions: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Cosine of the angle between each row of `directions` and each row of `points`."""
     a = directions / np.linalg.norm(directions, axis=1, keepdims=True)
     b = points / np.maximum(np.linalg.norm(points, axis=1, keepdims=True), 1e-300)
     return a @ b.T
+
+
+def _principal_curvatures(limit_state, u_star: np.ndarray, step: float) -> np.ndarray:
+    """Principal curvatures [1/U units] of the limit state g = 0 at a design point.
+
+    Central differences of step `step` give the gradient and Hessian of g at u* in one batched
+    call of 1 + 2d + 2d(d-1) rows. With alpha = -grad g / |grad g| (into the failure domain) and P
+    the projection on the tangent plane, the curvatures are the eigenvalues of
+    -P H P / |grad g| on that plane: positive where the surface bends back toward the origin
+    (the failure domain wraps around the design point), the case in which the weights of a
+    proposal centred at u* have a heavy tail (see _CURVATURE_K_LIMIT).
+    """
+    d = u_star.size
+    eye = np.eye(d)
+    pairs = [(i, j) for i in range(d) for j in range(i + 1, d)]
+    rows = [u_star]
+    rows += [u_star + step * eye[i] for i in range(d)]
+    rows += [u_star - step * eye[i] for i in range(d)]
+    for i, j in pairs:
+        for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            rows.append(u_star + step * (si * eye[i] + sj * eye[j]))
+    values = limit_state(np.array(rows))
+    centre, plus, minus = values[0], values[1 : d + 1], values[d + 1 : 2 * d + 1]
+    gradient = (plus - minus) / (2 * step)
+    hessian = np.diag((plus - 2 * centre + minus) / step**2)
+    mixed = values[2 * d + 1 :].reshape(-1, 4)
+    for (i, j), (pp, pm, mp, mm) in zip(pairs, mixed):
+        hessian[i, j] = hessian[j, i] = (pp - pm - mp + mm) / (4 * step**2)
+    norm = float(np.linalg.norm(gradient))
+    if not (np.all(np.isfinite(hessian)) and norm > 0 and math.isfinite(norm)):
+        return np.full(max(d - 1, 0), math.nan)
+    alpha = -gradient / norm
+    # orthonormal basis of the tangent plane: the last d - 1 columns of a QR of [alpha, I]
+    basis = np.linalg.qr(np.column_stack([alpha, eye]))[0][:, 1:d]
+    return np.linalg.eigvalsh(-basis.T @ hessian @ basis / norm)
+
+
+def _pareto_k(weights: np.ndarray) -> float:
+    """Shape k of a generalised Pareto fitted to the largest importance weights.
+
+    The tail size M = min(n / 5, 3 sqrt(n)) and the threshold (the (M+1)-th largest weight) follow
+    Vehtari et al. (2024); the fit is scipy's maximum likelihood with the location fixed at the
+    threshold (their Zhang & Stephens estimator differs only in small-sample details, which the
+    limits used here do not resolve). NaN with fewer than 20 positive weights.
+    """
+    positive = np.sort(weights[weights > 0])
+    n = positive.size
+    if n < 20:
+        return math.nan
+    m = int(min(n / 5, 3 * math.sqrt(n)))
+    threshold = positive[-m - 1]
+    tail = positive[-m:] - threshold
+    if not np.any(tail > 0):
+        return math.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        shape, _, _ = stats.genpareto.fit(tail / tail.max(), floc=0.0)
+    return float(shape)
 
 
 def _form_importance_sampling(
@@ -782,15 +912,15 @@ def _form_importance_sampling(
     # Probe for other branches of the failure domain: random directions one unit beyond beta,
     # one batched call; failures far from every known design point start another search.
     cos_branch = math.cos(math.radians(_BRANCH_ANGLE_DEG))
+    # Each extra search may fail or slide back to a known branch: cap them so a ragged failure
+    # domain cannot spend the budget on searches.
+    searches_left = 2 * max_design_points
     if probe_directions > 0 and max_design_points > 1:
         directions = rng.standard_normal((probe_directions, d))
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
         probe_values = limit_state((beta + 1.0) * directions)
         order = np.argsort(probe_values)
         candidates = [directions[i] for i in order if probe_values[i] <= 0]
-        # Each extra search may fail or slide back to a known branch: cap them so a ragged
-        # failure domain cannot spend the budget on searches.
-        searches_left = 2 * max_design_points
         while candidates and len(design_points) < max_design_points and searches_left > 0:
             searches_left -= 1
             known = np.array(design_points)
@@ -800,96 +930,198 @@ def _form_importance_sampling(
             if not candidates:
                 break
             candidate = candidates.pop(0)
-            u_new, ok_new, _ = _design_point(
-                limit_state, (beta + 1.0) * candidate, gradient_step, scale
-            )
-            if not ok_new:
+            u_new = _branch_point(limit_state, (beta + 1.0) * candidate, gradient_step, scale)
+            if u_new is None:
                 continue
             if _angle_cosines(u_new[np.newaxis], known).max() < cos_branch:
                 design_points.append(u_new)
             else:
                 # It slid back to a known branch: drop the probes near where it started.
                 candidates = [c for c in candidates if c @ candidate < cos_branch]
-        design_points.sort(key=lambda p: p @ p)
-        if len(design_points) > 1:
-            notes.append(
-                f"{len(design_points)} design points found (betas "
-                + ", ".join(f"{np.linalg.norm(p):.3f}" for p in design_points)
-                + "): importance sampling from their mixture"
-            )
-    centres = np.array(design_points)
-    betas = np.linalg.norm(centres, axis=1)
-    # beta is negative when the origin itself fails (then the event is not rare).
-    betas = betas if origin_value > 0 else -betas
-    # Mixture weights ~ Phi(-beta_k): each branch's FORM share of the probability.
-    log_mixture = stats.norm.logsf(betas)
-    log_mixture -= logsumexp(log_mixture)
     search_cost = limit_state.evaluations
-
-    terms = []
-    stray_share = 0.0
-    history = []
-    converged = False
-    failures = 0
-    while limit_state.evaluations < max_evaluations:
-        size = min(batch_size, max_evaluations - limit_state.evaluations)
-        component = rng.choice(len(centres), size=size, p=np.exp(log_mixture))
-        u = centres[component] + rng.standard_normal((size, d))
-        failed = limit_state(u) <= 0
-        # log phi(u) - log q(u), q the mixture of unit normals around the design points.
-        log_q = logsumexp(
-            log_mixture[np.newaxis, :]
-            - 0.5
-            * (
-                np.einsum("ij,ij->i", u, u)[:, None]
-                - 2 * u @ centres.T
-                + np.einsum("ij,ij->i", centres, centres)[None, :]
-            ),
-            axis=1,
-        )
-        batch_terms = np.where(failed, np.exp(-0.5 * np.einsum("ij,ij->i", u, u) - log_q), 0.0)
-        terms.append(batch_terms)
-        failures += int(failed.sum())
-        if failed.any():
-            # A failure belongs to a known branch when its projection on that design point's
-            # direction reaches near its beta (for a flat or convex branch it reaches beta
-            # itself); projections short of every beta by _STRAY_MARGIN lie elsewhere.
-            directions = centres / np.abs(betas)[:, None]
-            far = np.all(u[failed] @ directions.T < np.abs(betas) - _STRAY_MARGIN, axis=1)
-            stray_share += float(batch_terms[failed][far].sum())
-        values = np.concatenate(terms)
-        probability = float(values.mean())
-        standard_error = (
-            float(values.std(ddof=1) / math.sqrt(values.size)) if values.size > 1 else math.inf
-        )
-        cov = standard_error / probability if probability > 0 else math.inf
-        history.append(
-            {
-                "batch": len(history),
-                "evaluations": limit_state.evaluations,
-                "samples": int(values.size),
-                "failures": failures,
-                "probability": probability,
-                "cov": cov,
-            }
-        )
-        if failures >= _MIN_FAILURES_TO_STOP and cov <= target_cov:
-            converged = True
+    # Starts (directions) from which a search slid back to a known branch: failures near them
+    # start no further search.
+    tried: list[np.ndarray] = []
+    restarts = 0
+    while True:
+        design_points.sort(key=lambda p: p @ p)
+        centres = np.array(design_points)
+        betas = np.linalg.norm(centres, axis=1)
+        # beta is negative when the origin itself fails (then the event is not rare).
+        betas = betas if origin_value > 0 else -betas
+        # Mixture weights ~ Phi(-beta_k): each branch's FORM share of the probability.
+        log_mixture = stats.norm.logsf(betas)
+        log_mixture -= logsumexp(log_mixture)
+        directions = centres / np.maximum(np.abs(betas), 1e-300)[:, None]
+        terms = []
+        stray_share = 0.0
+        astray_share = 0.0
+        history = []
+        converged = False
+        failures = 0
+        new_point = None
+        while limit_state.evaluations < max_evaluations:
+            size = min(batch_size, max_evaluations - limit_state.evaluations)
+            component = rng.choice(len(centres), size=size, p=np.exp(log_mixture))
+            u = centres[component] + rng.standard_normal((size, d))
+            failed = limit_state(u) <= 0
+            # log phi(u) - log q(u), q the mixture of unit normals around the design points.
+            log_q = logsumexp(
+                log_mixture[np.newaxis, :]
+                - 0.5
+                * (
+                    np.einsum("ij,ij->i", u, u)[:, None]
+                    - 2 * u @ centres.T
+                    + np.einsum("ij,ij->i", centres, centres)[None, :]
+                ),
+                axis=1,
+            )
+            batch_terms = np.where(
+                failed, np.exp(-0.5 * np.einsum("ij,ij->i", u, u) - log_q), 0.0
+            )
+            terms.append(batch_terms)
+            failures += int(failed.sum())
+            if failed.any():
+                # A failure belongs to a known branch when its projection on that design
+                # point's direction reaches near its beta (for a flat or convex branch it
+                # reaches beta itself); projections short of every beta by _STRAY_MARGIN lie
+                # elsewhere.
+                far = np.all(
+                    u[failed] @ directions.T < np.abs(betas) - _STRAY_MARGIN, axis=1
+                )
+                stray_share += float(batch_terms[failed][far].sum())
+                # Failures more than _BRANCH_ANGLE_DEG away from every design point: another
+                # branch, or the far flank of a curved one.
+                astray = _angle_cosines(u[failed], centres).max(axis=1) < cos_branch
+                astray_share += float(batch_terms[failed][astray].sum())
+                # Such failures (away from every start that already slid back, too) start a
+                # search for another design point.
+                if len(design_points) < max_design_points and searches_left > 0:
+                    seen = np.vstack([centres] + ([np.array(tried)] if tried else []))
+                    lost = u[failed][_angle_cosines(u[failed], seen).max(axis=1) < cos_branch]
+                    if lost.size:
+                        searches_left -= 1
+                        candidate = lost[np.argmin(np.einsum("ij,ij->i", lost, lost))]
+                        u_new = _branch_point(limit_state, candidate, gradient_step, scale)
+                        if (
+                            u_new is not None
+                            and _angle_cosines(u_new[None], centres).max() < cos_branch
+                        ):
+                            new_point = u_new
+                            break
+                        tried.append(candidate)
+            values = np.concatenate(terms)
+            probability = float(values.mean())
+            standard_error = (
+                float(values.std(ddof=1) / math.sqrt(values.size))
+                if values.size > 1
+                else math.inf
+            )
+            cov = standard_error / probability if probability > 0 else math.inf
+            history.append(
+                {
+                    "batch": len(history),
+                    "evaluations": limit_state.evaluations,
+                    "samples": int(values.size),
+                    "failures": failures,
+                    "probability": probability,
+                    "cov": cov,
+                    "design_points": len(centres),
+                }
+            )
+            if failures >= _MIN_FAILURES_TO_STOP and cov <= target_cov:
+                converged = True
+                break
+        if new_point is None:
             break
-    if not terms:
+        # Another branch, found from the failures: restart the sampling with it in the mixture
+        # (the samples drawn so far came from a proposal that missed it and are dropped).
+        design_points.append(new_point)
+        restarts += 1
+    if not terms or not history:
         raise _bad(
             "max_evaluations",
             max_evaluations,
             f"the design point search used {search_cost} evaluations, none left for "
             "importance sampling",
         )
+    values = np.concatenate(terms)
+    if len(design_points) > 1:
+        found = (
+            f", {restarts} of them from failures found while sampling" if restarts else ""
+        )
+        notes.append(
+            f"{len(design_points)} design points found (betas "
+            + ", ".join(f"{abs(b):.3f}" for b in betas)
+            + f"{found}): importance sampling from their mixture"
+        )
+
+    # -- checks of the result: each failed check is a warning in words ----------------------
+    doubts = []
+    if max_design_points == 1:
+        doubts.append(
+            "max_design_points = 1: no other branch of the failure domain was searched for, and "
+            "a branch the samples around the one design point never reach is missed without "
+            "any sign in the result"
+        )
     total = float(values.sum())
     if total > 0 and stray_share / total > 0.01:
-        notes.append(
+        doubts.append(
             f"{stray_share / total:.1%} of the estimate comes from failures whose projection "
             f"falls {_STRAY_MARGIN} short of every design point's beta: the failure domain "
             "has branches the search missed, the estimate and its CoV may be too low"
         )
+    if total > 0 and astray_share / total > 0.01:
+        doubts.append(
+            f"{astray_share / total:.1%} of the estimate comes from failures more than "
+            f"{_BRANCH_ANGLE_DEG:g} deg away from every design point"
+            + (
+                " and the search for further design points was spent"
+                if len(design_points) < max_design_points
+                else f" and max_design_points = {max_design_points} was reached"
+            )
+            + ": part of the failure domain may lie where the proposal rarely samples, the "
+            "estimate and its CoV may be too low"
+        )
+    weights = values[values > 0]
+    if weights.size >= _MIN_FAILURES_TO_STOP:
+        ess = float(weights.sum() ** 2 / np.sum(weights**2))
+        if ess < _ESS_FRACTION_LIMIT * weights.size:
+            doubts.append(
+                f"the importance weights of the {weights.size} failures have an effective "
+                f"sample size of {ess:.1f} (Kish): a few samples carry the estimate, whose CoV "
+                "is then itself unreliable"
+            )
+        k_hat = _pareto_k(values)
+        if k_hat > _PARETO_K_LIMIT:
+            doubts.append(
+                f"the largest importance weights have a Pareto tail shape k = {k_hat:.2f} "
+                f"(> {_PARETO_K_LIMIT}: infinite variance, Vehtari et al. 2024): the stated CoV "
+                "and interval are not to be trusted"
+            )
+    curvatures = []
+    if origin_value > 0:
+        for point, b in zip(centres, betas):
+            kappa = _principal_curvatures(limit_state, point, _CURVATURE_STEP)
+            curvatures.append(kappa)
+            k_index = float(np.nanmax(kappa)) * abs(b) if np.any(np.isfinite(kappa)) else 0.0
+            if k_index > _CURVATURE_K_LIMIT:
+                doubts.append(
+                    f"the limit state is strongly curved at the design point of beta {abs(b):.3f}"
+                    f" (largest principal curvature {np.nanmax(kappa):.3g}, beta kappa = "
+                    f"{k_index:.2f} > {_CURVATURE_K_LIMIT}): the failure domain wraps around the "
+                    "design point, the importance weights have a heavy tail and the stated CoV "
+                    "runs low"
+                )
+    if doubts:
+        doubts.append(
+            'subset simulation (method="subset") assumes nothing about the shape of the failure '
+            "domain and would be safer here"
+        )
+    notes.extend(doubts)
+    probability = float(values.mean())
+    standard_error = float(values.std(ddof=1) / math.sqrt(values.size))
+    cov = standard_error / probability if probability > 0 else math.inf
     interval = _normal_interval(probability, standard_error)
     if converged:
         reason = f"target CoV {target_cov} reached"
@@ -905,6 +1137,7 @@ def _form_importance_sampling(
         "best": centres[0],
         "beta": float(betas[0]),
         "centres": centres,
+        "curvatures": curvatures,
         "notes": notes,
     }
 
