@@ -49,6 +49,9 @@ __all__ = [
     "updown",
 ]
 
+#: Interval methods of :func:`fit_probit`.
+INTERVALS = ("calibrated", "profile", "fieller", "wald")
+
 #: Labels accepted in the ``censored`` argument of :func:`fit_lognormal` and :func:`go_curve`.
 CENSOR_LABELS = ("", "above", "below")
 
@@ -382,9 +385,12 @@ class _LogNormalResponse:
     def _critical(self) -> float:
         return float(stats.chi2.ppf(self.confidence, df=1))
 
-    def _profile_quantile_interval(self, z: float, q_hat: float, open_limits=(False, False)):
+    def _profile_quantile_interval(
+        self, z: float, q_hat: float, open_limits=(False, False), crit: float | None = None
+    ):
         """Profile-likelihood interval (standardised) for q = mu + z sigma around q_hat."""
-        model, crit, l_max = self._model, self._critical(), self._loglik_max
+        model, l_max = self._model, self._loglik_max
+        crit = self._critical() if crit is None else crit
 
         def excess(q):
             return 2.0 * (l_max - model.profile_quantile(q, z)) - crit
@@ -438,6 +444,43 @@ def _quantile_result(model: _NormalLikelihood, q_std: float, low_std: float, hig
 # probit maximum likelihood
 
 
+def _updown_step(log_h: np.ndarray, went: np.ndarray) -> float | None:
+    """The logarithmic step when every drop followed the up-down rule with one step, else None."""
+    if log_h.size < 2:
+        return None
+    moves = np.diff(log_h) * np.where(went[:-1], -1.0, 1.0)
+    step = float(np.mean(moves))
+    if step <= 0 or np.any(np.abs(moves - step) > 0.05 * step):
+        return None
+    return step
+
+
+def _lr_statistic(log_h: np.ndarray, went: np.ndarray, q_log: float, z: float) -> float:
+    """2 (sup l - l_profile(q)) of probit data at the p-quantile q (ln h), z = Phi^-1(p).
+
+    The supremum is over b > 0: the maximum-likelihood value where it exists, the separated
+    data's supremum (each side's drops predicted perfectly, shared heights at their own
+    fraction), the best constant probability where the best slope is not positive.
+    """
+    model = _NormalLikelihood(np.empty(0), log_h[went], log_h[~went])
+    n, n_go = went.size, int(went.sum())
+    constant = _binomial_loglik(n_go, n, n_go / n)
+    if 0 < n_go < n and log_h[~went].max() <= log_h[went].min():
+        x0 = log_h[~went].max()
+        if x0 == log_h[went].min():
+            k, m = int((went & (log_h == x0)).sum()), int((~went & (log_h == x0)).sum())
+            sup = _binomial_loglik(k, k + m, k / (k + m))
+        else:
+            sup = 0.0
+    elif 0 < n_go < n and np.unique(log_h).size > 1:
+        a, b, l_max = model.maximise()
+        sup = max(l_max if b > 0 else -math.inf, constant)
+    else:
+        sup = constant
+    profile = model.profile_quantile(float(model.to_standardised(q_log)), z)
+    return max(2.0 * (sup - profile), 0.0)
+
+
 @dataclass(frozen=True)
 class ProbitFit(_LogNormalResponse):
     """Maximum-likelihood probit fit of go/no-go drops on ln h.
@@ -476,8 +519,12 @@ class ProbitFit(_LogNormalResponse):
     n: int = 0
     n_go: int = 0
     _covariance: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _cov_ab: np.ndarray | None = field(default=None, repr=False, compare=False)
     _kind: str = field(default="overlap", repr=False, compare=False)
     _tie_fraction: float = field(default=math.nan, repr=False, compare=False)
+    _drops: tuple | None = field(default=None, repr=False, compare=False)
+    n_bootstrap: int = 0
+    seed: int | None = 0
 
     def quantile(self, p: float) -> tuple[float, float, float]:
         """Height with P(go) = p, and its confidence interval.
@@ -507,17 +554,21 @@ class ProbitFit(_LogNormalResponse):
             if not self.exists:
                 return (math.nan, math.nan, math.nan)
             return self._wald_quantile(z)
+        if self.interval == "fieller" and self.exists:
+            return self._fieller_quantile(z)
         # open-ended sides: the profile tends to the best constant probability as q -> +-inf
         limit_high = _binomial_loglik(self.n_go, self.n, min(self.n_go / self.n, p))
         limit_low = _binomial_loglik(self.n_go, self.n, max(self.n_go / self.n, p))
         crit = self._critical()
+        if self.interval == "calibrated" and self.exists:
+            crit = self.calibrated_critical(p)
         open_limits = (
             2.0 * (self._loglik_max - limit_low) <= crit,
             2.0 * (self._loglik_max - limit_high) <= crit,
         )
         if self.exists:
             q_hat = -self._a / self._b + z / self._b
-            low, high, _ = self._profile_quantile_interval(z, q_hat, open_limits)
+            low, high, _ = self._profile_quantile_interval(z, q_hat, open_limits, crit)
             return _quantile_result(model, q_hat, low, high)
         # No overlap: the likelihood's supremum is reached (sigma -> 0) for any q strictly
         # between the highest no-go and the lowest go, so the search starts in that gap. When
@@ -532,6 +583,86 @@ class ProbitFit(_LogNormalResponse):
         low, high, _ = self._profile_quantile_interval(z, start, open_limits)
         _, low_h, high_h = _quantile_result(model, 0.0, low, high)
         return (math.nan, low_h, high_h)
+
+    def calibrated_critical(self, p: float) -> float:
+        """Critical value of the likelihood-ratio statistic for the p-quantile, by bootstrap.
+
+        A parametric bootstrap (Efron & Tibshirani 1993, ch. 16; the calibration of a
+        likelihood-ratio statistic is in Hall 1992, ch. 3): ``n_bootstrap`` data sets are drawn
+        from the fitted curve with the experiment's own design, the statistic
+        2 (l_max - l_profile(q)) is computed at the fitted quantile q (the truth of the
+        simulated world), and its ``confidence`` quantile replaces chi2_1(confidence). The
+        design: when the drops follow the up-down rule on a regular logarithmic grid, new
+        up-down sequences of the same length from the same first height and step; otherwise
+        the observed heights with new outcomes. Data sets without a maximum-likelihood estimate
+        (no overlap) enter with the statistic from the likelihood's supremum, as the data
+        would.
+
+        Parameters
+        ----------
+        p : float
+            Probability of the quantile, in (0, 1).
+
+        Returns
+        -------
+        float
+            The calibrated critical value; chi2_1(confidence) where no fit exists.
+        """
+        p = _as_probability("p", p)
+        if not self.exists or self._drops is None or self.n_bootstrap < 1:
+            return self._critical()
+        key = (p, self.n_bootstrap, self.seed)
+        cache = self.__dict__.setdefault("_calibration_cache", {})
+        if key in cache:
+            return cache[key]
+        z = float(special.ndtri(p))
+        heights, went = self._drops
+        log_h = np.log(heights)
+        mu, sigma = self.mu, self.sigma
+        q_true = mu + z * sigma
+        rng = np.random.default_rng(self.seed)
+        step = _updown_step(log_h, went)
+        statistics = np.empty(self.n_bootstrap)
+        for i in range(self.n_bootstrap):
+            if step is not None:
+                # integer levels, so that a level reached twice is the same number (a tie)
+                level, sim_h = 0, np.empty(heights.size)
+                sim_went = np.empty(heights.size, bool)
+                critical = rng.normal(mu, sigma, heights.size)
+                for j in range(heights.size):
+                    sim_h[j] = log_h[0] + level * step
+                    sim_went[j] = critical[j] <= sim_h[j]
+                    level += -1 if sim_went[j] else 1
+            else:
+                sim_h = log_h
+                sim_went = rng.random(heights.size) < special.ndtr((log_h - mu) / sigma)
+            statistics[i] = _lr_statistic(sim_h, sim_went, q_true, z)
+        value = float(np.quantile(statistics, self.confidence))
+        cache[key] = value
+        return value
+
+    def _fieller_quantile(self, z: float) -> tuple[float, float, float]:
+        """Fieller's (1954) interval for q = (z - a) / b, a ratio of normal estimates.
+
+        The set of q where (a + b q - z)^2 <= k Var(a + b q), k the chi-square critical value
+        and the variance from the observed information of (a, b): a quadratic inequality
+        A q^2 + B q + C <= 0. With A > 0 it is the interval between the roots; with A <= 0 (the
+        slope b is not significantly above 0 at this level) it is unbounded and the interval is
+        reported as (0, inf).
+        """
+        model, k = self._model, self._critical()
+        a, b = self._a, self._b
+        (v_aa, v_ab), (_, v_bb) = self._cov_ab
+        shifted = a - z
+        quad_a = b * b - k * v_bb
+        quad_b = 2.0 * (shifted * b - k * v_ab)
+        quad_c = shifted * shifted - k * v_aa
+        q_hat = -shifted / b
+        if quad_a <= 0:
+            return _quantile_result(model, q_hat, -math.inf, math.inf)
+        root = math.sqrt(max(quad_b * quad_b - 4.0 * quad_a * quad_c, 0.0))
+        low, high = (-quad_b - root) / (2 * quad_a), (-quad_b + root) / (2 * quad_a)
+        return _quantile_result(model, q_hat, low, high)
 
     def _wald_quantile(self, z: float) -> tuple[float, float, float]:
         model = self._model
@@ -568,7 +699,10 @@ class ProbitFit(_LogNormalResponse):
         return (0.0, high * model.scale if math.isfinite(high) else math.inf)
 
 
-def fit_probit(heights, went, confidence: float = 0.95, *, interval: str = "profile") -> ProbitFit:
+def fit_probit(
+    heights, went, confidence: float = 0.95, *, interval: str = "profile",
+    n_bootstrap: int = 199, seed: int | None = 0,
+) -> ProbitFit:
     """Fit P(go | h) = Phi((ln h - mu) / sigma) to go/no-go drops by maximum likelihood.
 
     Parameters
@@ -603,16 +737,19 @@ def fit_probit(heights, went, confidence: float = 0.95, *, interval: str = "prof
     _both_outcomes("went", went)
     confidence = _as_confidence(confidence)
     heights = _snap(heights)
-    if interval not in ("profile", "wald"):
-        raise _bad("interval", interval, 'must be "profile" or "wald"')
+    if interval not in INTERVALS:
+        raise _bad("interval", interval, f"must be one of {', '.join(map(repr, INTERVALS))}")
 
     log_h = np.log(heights)
     model = _NormalLikelihood(np.empty(0), log_h[went], log_h[~went])
     n, n_go = heights.size, int(went.sum())
     highest_nogo, lowest_go = float(heights[~went].max()), float(heights[went].min())
     highest_go, lowest_nogo = float(heights[went].max()), float(heights[~went].min())
+    if int(n_bootstrap) < 1:
+        raise _bad("n_bootstrap", n_bootstrap, "must be an integer >= 1")
     common = {"confidence": confidence, "interval": interval, "n": n, "n_go": n_go,
-              "_model": model}
+              "_model": model, "_drops": (heights, went), "n_bootstrap": int(n_bootstrap),
+              "seed": seed}
 
     if np.unique(heights).size < 2:
         return ProbitFit(
@@ -666,7 +803,7 @@ def fit_probit(heights, went, confidence: float = 0.95, *, interval: str = "prof
     covariance = jac @ cov_ab @ jac.T
     return ProbitFit(
         mu=model.to_log_height(-a / b), sigma=model.scale / b, _loglik_max=l_max, _a=a, _b=b,
-        loglik=l_max, _covariance=covariance, **common,
+        loglik=l_max, _covariance=covariance, _cov_ab=cov_ab, **common,
     )
 
 
