@@ -32,6 +32,10 @@ import numpy as np
 import xarray as xr
 from scipy import optimize, special, stats
 
+from skidmc.analysis.checks import bad as _bad
+from skidmc.analysis.checks import check_confidence as _as_confidence
+from skidmc.analysis.checks import check_probability as _as_probability
+
 __all__ = [
     "DropScores",
     "H50Comparison",
@@ -68,11 +72,6 @@ _SAME_HEIGHT_RTOL = 1e-9
 
 # --------------------------------------------------------------------------------------------
 # input checks
-
-
-def _bad(name: str, value: object, reason: str) -> ValueError:
-    """A ValueError whose message names the argument and shows the offending value."""
-    return ValueError(f"{name} = {value!r}: {reason}")
 
 
 def _as_heights(name: str, values: object) -> np.ndarray:
@@ -130,16 +129,6 @@ def _both_outcomes(name: str, went: np.ndarray) -> None:
         )
 
 
-def _as_confidence(confidence: object) -> float:
-    try:
-        level = float(confidence)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise _bad("confidence", confidence, "must be a number in (0, 1)") from None
-    if not 0.0 < level < 1.0:
-        raise _bad("confidence", confidence, "must be in (0, 1), e.g. 0.95")
-    return level
-
-
 def _as_censoring(censored: object, size: int) -> np.ndarray:
     """`censored` as an array of labels in CENSOR_LABELS (None: all exact)."""
     if censored is None:
@@ -153,16 +142,6 @@ def _as_censoring(censored: object, size: int) -> np.ndarray:
                 f"censored[{index}]", label, 'must be "" (exact), "above" or "below"'
             )
     return labels
-
-
-def _as_probability(name: str, p: object) -> float:
-    try:
-        value = float(p)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise _bad(name, p, "must be a probability in (0, 1)") from None
-    if not 0.0 < value < 1.0:
-        raise _bad(name, p, "must be a probability in (0, 1)")
-    return value
 
 
 # --------------------------------------------------------------------------------------------

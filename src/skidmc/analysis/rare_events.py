@@ -20,7 +20,6 @@ Methods (see ``docs/rare-events.md`` for the assumptions and the literature):
 from __future__ import annotations
 
 import math
-import numbers
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -28,6 +27,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize, stats
 from scipy.special import logsumexp, ndtr, ndtri
+
+from skidmc.analysis.checks import bad as _bad
+from skidmc.analysis.checks import check_positive_float as _check_positive_float
+from skidmc.analysis.checks import check_positive_int as _check_positive_int
+from skidmc.analysis.checks import check_seed as _check_seed
+from skidmc.ensemble.sampling import correlate_normal_scores
 
 __all__ = [
     "CONFIDENCE",
@@ -77,14 +82,6 @@ _PARETO_K_LIMIT = 0.5
 # Kish's effective sample size of the failures' weights, as a fraction of the failure count,
 # below which a handful of samples carries the estimate.
 _ESS_FRACTION_LIMIT = 0.1
-
-
-def _bad(name: str, value: object, reason: str) -> ValueError:
-    """A ValueError in skidmc's style: ``"{name} = {value!r}: {reason}"``."""
-    text = repr(value)
-    if len(text) > 300:  # a long array repr would bury the reason
-        text = text[:300] + "..."
-    return ValueError(f"{name} = {text}: {reason}")
 
 
 def _check_marginals(marginals: Sequence) -> tuple:
@@ -139,28 +136,6 @@ def _check_correlation(correlation, dimension: int) -> np.ndarray:
             f"must be positive definite (smallest eigenvalue {smallest:.3g})",
         ) from None
     return matrix
-
-
-def _check_seed(seed) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
-        raise _bad("seed", seed, "expected an integer >= 0")
-    return int(seed)
-
-
-def _check_positive_int(name: str, value, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
-        raise _bad(name, value, f"expected an integer >= {minimum}")
-    return int(value)
-
-
-def _check_positive_float(name: str, value) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, numbers.Real)
-        or not (math.isfinite(value) and value > 0)
-    ):
-        raise _bad(name, value, "expected a finite number > 0")
-    return float(value)
 
 
 def _quantile(marginal, normal_scores: np.ndarray) -> np.ndarray:
@@ -228,7 +203,7 @@ class GaussianCopulaTransform:
             Inputs in the marginals' physical units.
         """
         u = self._rows(u, "u")
-        z = u @ self.cholesky.T
+        z = correlate_normal_scores(u, self.cholesky)
         x = np.empty_like(z)
         for j, marginal in enumerate(self.marginals):
             x[:, j] = _quantile(marginal, z[:, j])
@@ -960,8 +935,13 @@ def _form_importance_sampling(
         converged = False
         failures = 0
         new_point = None
-        while limit_state.evaluations < max_evaluations:
-            size = min(batch_size, max_evaluations - limit_state.evaluations)
+        # The curvature check's rows are kept out of the sampling budget when they fit in a
+        # fifth of it; otherwise the check is skipped (and the result says so).
+        curvature_rows = len(centres) * (1 + 2 * d * d)
+        reserve = curvature_rows if curvature_rows <= 0.2 * max_evaluations else 0
+        sampling_budget = max_evaluations - reserve
+        while limit_state.evaluations < sampling_budget:
+            size = min(batch_size, sampling_budget - limit_state.evaluations)
             component = rng.choice(len(centres), size=size, p=np.exp(log_mixture))
             u = centres[component] + rng.standard_normal((size, d))
             failed = limit_state(u) <= 0
@@ -1007,9 +987,20 @@ def _form_importance_sampling(
                             u_new is not None
                             and _angle_cosines(u_new[None], centres).max() < cos_branch
                         ):
-                            new_point = u_new
-                            break
-                        tried.append(candidate)
+                            # restart only when a batch still fits after the larger reserve
+                            more = (len(centres) + 1) * (1 + 2 * d * d)
+                            room = max_evaluations - (more if reserve else 0)
+                            if room - limit_state.evaluations >= batch_size:
+                                new_point = u_new
+                                break
+                            searches_left = 0
+                            notes.append(
+                                "a further design point was found from the failures (beta "
+                                f"{np.linalg.norm(u_new):.3f}) with no budget left to sample "
+                                "around it; raise max_evaluations"
+                            )
+                        else:
+                            tried.append(candidate)
             values = np.concatenate(terms)
             probability = float(values.mean())
             standard_error = (
@@ -1100,7 +1091,12 @@ def _form_importance_sampling(
                 "and interval are not to be trusted"
             )
     curvatures = []
-    if origin_value > 0:
+    if origin_value > 0 and not reserve:
+        notes.append(
+            f"the curvature at the design points was not checked: its {curvature_rows} "
+            f"evaluations exceed a fifth of max_evaluations = {max_evaluations}"
+        )
+    elif origin_value > 0:
         for point, b in zip(centres, betas):
             kappa = _principal_curvatures(limit_state, point, _CURVATURE_STEP)
             curvatures.append(kappa)

@@ -29,6 +29,9 @@ import numpy as np
 import xarray as xr
 from scipy.special import ndtr, ndtri
 
+from skidmc.analysis.checks import check_confidence as _check_confidence
+from skidmc.analysis.checks import check_seed as _check_seed
+
 __all__ = [
     "GrowthResult",
     "PreparedOutput",
@@ -106,19 +109,6 @@ def rows_per_base_row(problem: dict, second_order: bool = False) -> int:
     _, index_names, _ = _check_problem(problem)
     n_index = len(index_names)
     return 2 * n_index + 2 if second_order else n_index + 2
-
-
-def _check_seed(seed) -> int:
-    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
-        raise ValueError(f"seed = {seed!r}: expected an integer >= 0 (0 is a seed like any other)")
-    return int(seed)
-
-
-def _check_confidence(confidence) -> float:
-    if (isinstance(confidence, bool) or not isinstance(confidence, numbers.Real)
-            or not 0.0 < confidence < 1.0):
-        raise ValueError(f"confidence = {confidence!r}: expected a number in (0, 1)")
-    return float(confidence)
 
 
 def _check_resamples(resamples) -> int:

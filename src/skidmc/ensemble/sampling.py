@@ -266,16 +266,36 @@ def _copula(study: Study, u: np.ndarray) -> np.ndarray:
     for c in study.correlations:
         a, b = names.index(c.keys[0]), names.index(c.keys[1])
         r[a, b] = r[b, a] = c.rho
-    chol = np.linalg.cholesky(r)
-    z = ndtri(u[:, cols])
+    z = correlate_normal_scores(ndtri(u[:, cols]), np.linalg.cholesky(r))
     out = u.copy()
-    for j, col in enumerate(cols):
+    out[:, cols] = ndtr(z)
+    return out
+
+
+def correlate_normal_scores(z: np.ndarray, cholesky: np.ndarray) -> np.ndarray:
+    """Gaussian copula: independent normal scores z (rows) -> z L^T, row by row.
+
+    Parameters
+    ----------
+    z : ndarray, shape (m, d)
+        Independent standard normal scores [-].
+    cholesky : ndarray, shape (d, d)
+        Lower Cholesky factor L of the copula's correlation matrix.
+
+    Returns
+    -------
+    ndarray, shape (m, d)
+        Normal scores with correlation L L^T [-]. Shared by :func:`transform` and
+        :class:`skidmc.analysis.rare_events.GaussianCopulaTransform`.
+    """
+    out = np.empty_like(z)
+    for j in range(z.shape[1]):
         # An explicit sum rather than z @ chol.T: BLAS may order a matrix product's sums by the
         # batch's shape, and a sample must not depend on which batch it travels in.
-        zj = chol[j, 0] * z[:, 0]
+        zj = cholesky[j, 0] * z[:, 0]
         for k in range(1, j + 1):
-            zj = zj + chol[j, k] * z[:, k]
-        out[:, col] = ndtr(zj)
+            zj = zj + cholesky[j, k] * z[:, k]
+        out[:, j] = zj
     return out
 
 
