@@ -201,6 +201,60 @@ def test_dixon_mood_on_report_table_iii_quartz():
     assert any("N = 4" in r for r in result.reasons)
 
 
+# A published staircase worked to the end: Ekaputra, Dewa, Haryadi & Kim, "Fatigue strength
+# analysis of S34MnV steel by accelerated staircase test", Open Engineering 10 (2020) 394-400,
+# doi:10.1515/eng-2020-0048. Stress amplitude [MPa] -> (fractures = "go", survivals = "no-go");
+# step d = 20 MPa on the linear stress scale; 12 specimens; the order of the trials is not
+# printed. Printed answer: fractures are the less frequent outcome (N = 5), A = 8 and B = 14
+# with i = 0 at 260 MPa, mean 282 MPa, M = 0.24 < 0.3, so the paper takes the spread from the
+# fallback of ISO 12107 / GB/T 24176, s = 0.53 d = 10.6 MPa (the formula would give 8.7 MPa).
+STAIRCASE_S34MNV = {300.0: (3, 0), 280.0: (2, 4), 260.0: (0, 3)}
+
+
+def test_dixon_mood_on_a_published_staircase_from_counts():
+    result = updown(counts=STAIRCASE_S34MNV, scale="linear", small_m="iso12107")
+    assert result.outcome_used == "go" and result.n_used == 5
+    # i = 0 here at 280 MPa (the lowest level with a fracture): A = 3, B = 3; with the paper's
+    # i = 0 at 260 MPa, A = 8 = 3 + 5 and B = 14 = 3 + 2*3 + 5; mean and M do not change.
+    assert (result.a_sum, result.b_sum) == (3, 3)
+    assert result.a_sum + result.n_used == 8
+    assert result.b_sum + 2 * result.a_sum + result.n_used == 14
+    # exact arithmetic: 280 + 20 (3/5 - 1/2) = 282; M = (5*3 - 9)/25 = 0.24; 1e-12 is round-off
+    assert result.h50 == pytest.approx(282.0, rel=1e-12)
+    assert result.step == pytest.approx(20.0, rel=1e-12)
+    assert result.m_statistic == pytest.approx(0.24, abs=1e-12)
+    # the paper prints 10.6 MPa = 0.53 * 20 exactly
+    assert result.sigma == pytest.approx(10.6, rel=1e-12)
+    assert result.sigma_rule.startswith("ISO 12107")
+    assert not result.valid and any("= 0.24 < 0.3" in r for r in result.reasons)
+    # the default convention leaves sigma undefined and says how to get the published fallback
+    default = updown(counts=STAIRCASE_S34MNV, scale="linear")
+    assert math.isnan(default.sigma) and any("iso12107" in r for r in default.reasons)
+    # Dixon-Mood's formula outside its range would give 1.62 d (M + 0.029) = 8.7 MPa (printed)
+    assert 1.62 * 20.0 * (0.24 + 0.029) == pytest.approx(8.7, abs=0.05)
+
+
+def test_dixon_mood_counts_and_sequence_agree_and_scale_matters():
+    heights, went = _worked_sequence(False)
+    sequence = updown(heights, went)
+    counts: dict = {}
+    for h, w in zip(np.round(heights, 9), went):
+        gos, nogos = counts.get(h, (0, 0))
+        counts[h] = (gos + w, nogos + (1 - w))
+    from_counts = updown(counts=counts)
+    assert from_counts.h50 == pytest.approx(sequence.h50, rel=1e-9)
+    assert from_counts.sigma == pytest.approx(sequence.sigma, rel=1e-9)
+    assert any("not checked" in r for r in from_counts.reasons)
+    # the same heights on the linear scale are off a regular grid (10^1.0, 10^1.1, ...)
+    assert math.isnan(updown(heights, went, scale="linear").h50)
+    with pytest.raises(ValueError, match="scale = 'ln'"):
+        updown(heights, went, scale="ln")
+    with pytest.raises(ValueError, match="not both"):
+        updown(heights, went, counts=counts)
+    with pytest.raises(ValueError, match=r"counts\[1.0\] = \(1, -2\)"):
+        updown(counts={1.0: (1, -2), 2.0: (1, 1)})
+
+
 def test_dixon_mood_flags_a_broken_sequence_and_refuses_an_irregular_grid():
     drops = load_drops("alumina_20_35")  # drop 7 removed: 13.1 N followed by 13.1
     result = updown(drops.heights, drops.went)

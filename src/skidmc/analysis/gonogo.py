@@ -790,6 +790,15 @@ def fit_probit(
 # Dixon-Mood up-down analysis
 
 
+#: Conventions of :func:`updown` for the spread when M < 0.3, where Dixon & Mood's formula
+#: does not apply.
+SMALL_M_CONVENTIONS = ("nan", "iso12107")
+
+#: Spread as a multiple of the step when M < 0.3 under ISO 12107:2012 (and GB/T 24176-2009,
+#: which follows it), s = 0.53 d.
+_ISO_SMALL_M_FACTOR = 0.53
+
+
 @dataclass(frozen=True)
 class UpDownResult:
     """Dixon-Mood analysis of an up-down sequence.
@@ -797,25 +806,34 @@ class UpDownResult:
     Attributes
     ----------
     h50 : float
-        Estimated median height, in the unit of the input heights (NaN when the heights are not
-        on a regular logarithmic grid).
+        Estimated median, in the unit of the input heights (stimuli) (NaN when the levels are
+        not on a regular grid of the chosen scale).
     sigma : float
-        Estimated standard deviation of ln h_c [-]; NaN where Dixon-Mood's formula does not
-        apply (M <= 0.3).
+        Estimated standard deviation of the critical stimulus: of ln h [-] on the "log" scale,
+        in the input unit on the "linear" scale. Where M < 0.3 it is NaN, or 0.53 d with
+        ``small_m="iso12107"`` (see :func:`updown`).
     valid : bool
         True only when every condition of the method holds (see ``reasons``).
     reasons : list of str
         Each condition that fails, in words; empty when ``valid``.
     mu : float
-        ln of ``h50``.
+        Mean of the critical stimulus on the chosen scale: ln of ``h50`` ("log"), ``h50``
+        ("linear").
     step : float
-        Logarithmic step d between levels [-].
+        Step d between levels on the chosen scale (logarithmic [-] or in the input unit).
     outcome_used : str
         "go" or "no-go": the less frequent outcome, on which the estimate is based.
     n_used, a_sum, b_sum : int
-        Dixon-Mood's N, A = sum i n_i and B = sum i^2 n_i for the outcome used.
+        Dixon-Mood's N, A = sum i n_i and B = sum i^2 n_i for the outcome used, with i = 0 at
+        the lowest level at which that outcome occurred (numbering from a lower level changes A
+        and B but neither the mean nor M).
     m_statistic : float
         M = (N B - A^2) / N^2.
+    scale : str
+        "log" or "linear".
+    sigma_rule : str
+        How ``sigma`` was obtained: "Dixon-Mood 1.62 d (M + 0.029)", "ISO 12107 0.53 d (M < 0.3)"
+        or "none (M < 0.3)".
     """
 
     h50: float
@@ -829,31 +847,69 @@ class UpDownResult:
     a_sum: int = 0
     b_sum: int = 0
     m_statistic: float = math.nan
+    scale: str = "log"
+    sigma_rule: str = ""
+
+
+def _counts_to_drops(counts) -> tuple[np.ndarray, np.ndarray]:
+    """{level: (gos, no-gos)} -> (levels, outcomes) with one entry per drop (order unknown)."""
+    if not isinstance(counts, dict) or not counts:
+        raise _bad("counts", counts, "must be a non-empty dict {level: (gos, no-gos)}")
+    levels, outcomes = [], []
+    for level, pair in counts.items():
+        try:
+            gos, nogos = (int(v) for v in pair)
+            value = float(level)
+        except (TypeError, ValueError):
+            raise _bad(
+                f"counts[{level!r}]", pair, "must be a pair of counts (gos, no-gos)"
+            ) from None
+        if gos < 0 or nogos < 0 or any(float(v) != int(v) for v in pair):
+            raise _bad(f"counts[{level!r}]", pair, "counts must be integers >= 0")
+        levels += [value] * (gos + nogos)
+        outcomes += [True] * gos + [False] * nogos
+    if not levels:
+        raise _bad("counts", counts, "holds no drops")
+    return np.array(levels), np.array(outcomes)
 
 
 def updown(
-    heights, went, *, step_tolerance: float = 0.05, min_count: int = 10
+    heights=None, went=None, *, counts=None, scale: str = "log", small_m: str = "nan",
+    step_tolerance: float = 0.05, min_count: int = 10,
 ) -> UpDownResult:
-    """Dixon & Mood (1948) estimates of the median and spread of ln h from an up-down sequence.
+    """Dixon & Mood (1948) estimates of the median and spread from an up-down sequence.
 
-    The heights must be in test order. Levels are read on ln h; with d the logarithmic step,
-    i the level index counted from the lowest level at which the less frequent outcome occurred,
-    n_i its count there, N = sum n_i, A = sum i n_i, B = sum i^2 n_i:
+    Levels are read on the chosen scale (ln h for "log", the stimulus itself for "linear");
+    with d the step, i the level index counted from the lowest level at which the less frequent
+    outcome occurred, y0 that level, n_i the count there, N = sum n_i, A = sum i n_i,
+    B = sum i^2 n_i:
 
         mean = y0 + d (A/N + 1/2)  (estimate based on no-gos)
         mean = y0 + d (A/N - 1/2)  (estimate based on gos)
-        s = 1.62 d (M + 0.029),    M = (N B - A^2) / N^2.
+        s = 1.62 d (M + 0.029),    M = (N B - A^2) / N^2, for M >= 0.3.
 
     Parameters
     ----------
-    heights : array_like of float
-        Drop heights in test order, > 0, any unit.
-    went : array_like of bool
+    heights : array_like of float, optional
+        Drop heights (stimuli) in test order, > 0, any unit.
+    went : array_like of bool, optional
         Outcome of each drop (True = go).
+    counts : dict, optional
+        Instead of ``heights`` and ``went``: ``{level: (gos, no-gos)}``, the form in which
+        published staircase data often come (the order of the trials unprinted). Dixon-Mood
+        uses only these counts; the up-down rule then cannot be checked (a reason says so).
+    scale : {"log", "linear"}, optional
+        The scale on which the levels are equally spaced and the critical stimulus is normal:
+        "log" (the default, as for drop heights of explosives) or "linear" (e.g. stress
+        amplitudes of fatigue staircases).
+    small_m : {"nan", "iso12107"}, optional
+        Convention when M < 0.3, where Dixon & Mood's spread formula does not hold: "nan" (the
+        default) leaves sigma NaN; "iso12107" gives s = 0.53 d, the fallback of ISO 12107:2012
+        (and GB/T 24176). Either way a reason records it and the result is not ``valid``.
     step_tolerance : float, optional
-        Largest allowed distance of a level from the regular logarithmic grid, as a fraction of
-        the step. The default 5 % accepts heights printed to three significant figures (rounding
-        moves ln h by up to 0.5 % of the height, a few per cent of a typical step of 0.1-0.4).
+        Largest allowed distance of a level from the regular grid, as a fraction of the step.
+        The default 5 % accepts heights printed to three significant figures (rounding moves
+        ln h by up to 0.5 % of the height, a few per cent of a typical step of 0.1-0.4).
     min_count : int, optional
         Smallest N (count of the less frequent outcome) for which the large-sample formulas are
         taken as usable; below it the result is flagged invalid (see Notes).
@@ -861,25 +917,39 @@ def updown(
     Returns
     -------
     UpDownResult
-        Estimates with ``valid`` and the list of failed conditions. When the heights are not on
-        a regular logarithmic grid, the method cannot be applied: h50 and sigma are NaN.
+        Estimates with ``valid`` and the list of failed conditions. When the levels are not on
+        a regular grid of the chosen scale, the method cannot be applied: h50 and sigma are NaN.
         When the order breaks the up-down rule (one step down after a go, up after a no-go),
         the estimates are still computed from the counts but flagged invalid, drop by drop.
 
     Raises
     ------
     ValueError
-        For bad heights or outcomes, mismatched lengths, or a single outcome class.
+        For bad heights, outcomes or counts, both or neither of (heights, went) and counts,
+        mismatched lengths, a single outcome class, or an unknown scale or convention.
 
     Notes
     -----
-    Conditions checked: levels on a regular logarithmic grid; the up-down rule between
-    consecutive drops; M > 0.3, without which Dixon & Mood's spread formula does not apply;
+    Conditions checked: levels on a regular grid; the up-down rule between consecutive drops
+    (sequences only); M >= 0.3, without which Dixon & Mood's spread formula does not apply;
     a step within 0.5-2 s (Dixon & Mood's recommended range, outside which their approximations
     degrade); N >= ``min_count``. Dixon & Mood derived the formulas as large-sample
     approximations; the threshold of 10 is this package's conservative reading of that, not a
     number from the paper (Brownlee, Hodges & Rosenblatt 1953 and Dixon 1965 treat small samples).
+    On a tie of the two outcomes' counts the gos are used.
     """
+    if scale not in ("log", "linear"):
+        raise _bad("scale", scale, 'must be "log" or "linear"')
+    if small_m not in SMALL_M_CONVENTIONS:
+        choices = ", ".join(map(repr, SMALL_M_CONVENTIONS))
+        raise _bad("small_m", small_m, f"must be one of {choices}")
+    from_counts = counts is not None
+    if from_counts:
+        if heights is not None or went is not None:
+            raise _bad("counts", counts, "give either counts or (heights, went), not both")
+        heights, went = _counts_to_drops(counts)
+    elif heights is None or went is None:
+        raise _bad("heights", heights, "give heights and went (in test order), or counts")
     heights = _as_heights("heights", heights)
     went = _as_outcomes("went", went, heights.size, "heights")
     _both_outcomes("went", went)
@@ -888,11 +958,19 @@ def updown(
     if int(min_count) < 1:
         raise _bad("min_count", min_count, "must be >= 1")
 
-    log_h = np.log(_snap(heights))
-    levels = np.unique(log_h)
+    snapped = _snap(heights)
+    y = np.log(snapped) if scale == "log" else snapped
+    levels = np.unique(y)
     reasons: list[str] = []
+    if from_counts:
+        reasons.append("counts per level were given: the up-down rule was not checked")
+
+    def back(value: float) -> float:
+        return math.exp(value) if scale == "log" else value
+
     if levels.size < 2:
-        return UpDownResult(math.nan, math.nan, False, ["all drops at one height: no step"])
+        return UpDownResult(math.nan, math.nan, False, ["all drops at one height: no step"],
+                            scale=scale)
 
     # Regular grid: index every level by the smallest gap, then refine the step by least squares.
     first_step = float(np.min(np.diff(levels)))
@@ -900,27 +978,29 @@ def updown(
     step = float(np.sum(index * (levels - levels[0])) / np.sum(index * index))
     off_grid = np.abs(levels - levels[0] - index * step) > step_tolerance * step
     if off_grid.any():
-        bad_heights = ", ".join(f"{h:g}" for h in np.exp(levels[off_grid]))
+        bad_heights = ", ".join(f"{back(v):g}" for v in levels[off_grid])
         return UpDownResult(
             math.nan, math.nan, False,
-            [(f"heights {bad_heights} are off the regular logarithmic grid of step "
+            [(f"heights {bad_heights} are off the regular "
+              f"{'logarithmic' if scale == 'log' else 'linear'} grid of step "
               f"{step:.4g} (tolerance {step_tolerance:.0%} of a step): Dixon-Mood does not "
               "apply")],
-            step=step,
+            step=step, scale=scale,
         )
     level_of = {float(v): int(i) for v, i in zip(levels, index)}
-    k = np.array([level_of[float(v)] for v in log_h])
+    k = np.array([level_of[float(v)] for v in y])
 
-    for drop in range(heights.size - 1):
-        expected = k[drop] - 1 if went[drop] else k[drop] + 1
-        if k[drop + 1] != expected:
-            outcome = "go" if went[drop] else "no-go"
-            reasons.append(
-                f"drop {drop + 2} (in the order given) breaks the up-down rule: after a "
-                f"{outcome} at "
-                f"{heights[drop]:g} it was made at {heights[drop + 1]:g}, not one step "
-                f"{'down' if went[drop] else 'up'}"
-            )
+    if not from_counts:
+        for drop in range(heights.size - 1):
+            expected = k[drop] - 1 if went[drop] else k[drop] + 1
+            if k[drop + 1] != expected:
+                outcome = "go" if went[drop] else "no-go"
+                reasons.append(
+                    f"drop {drop + 2} (in the order given) breaks the up-down rule: after a "
+                    f"{outcome} at "
+                    f"{heights[drop]:g} it was made at {heights[drop + 1]:g}, not one step "
+                    f"{'down' if went[drop] else 'up'}"
+                )
 
     n_go = int(went.sum())
     use_go = n_go <= heights.size - n_go  # the less frequent outcome; the gos on a tie
@@ -932,16 +1012,27 @@ def updown(
     mu = y0 + step * (a_sum / n_used + sign)
     m_stat = (n_used * b_sum - a_sum**2) / n_used**2
     sigma = math.nan
-    if m_stat > 0.3:
+    if m_stat >= 0.3:
         sigma = 1.62 * step * (m_stat + 0.029)
+        rule = "Dixon-Mood 1.62 d (M + 0.029)"
         if not 0.5 <= step / sigma <= 2.0:
             reasons.append(
                 f"step d = {step:.3g} is {step / sigma:.2f} s; Dixon-Mood want 0.5-2 s"
             )
-    else:
+    elif small_m == "iso12107":
+        sigma = _ISO_SMALL_M_FACTOR * step
+        rule = "ISO 12107 0.53 d (M < 0.3)"
         reasons.append(
-            f"M = (NB - A^2)/N^2 = {m_stat:.3g} <= 0.3: Dixon-Mood's spread formula does not "
-            "apply (sigma is NaN); the step is probably too large for the spread"
+            f"M = (NB - A^2)/N^2 = {m_stat:.3g} < 0.3: Dixon-Mood's spread formula does not "
+            f"apply; sigma = 0.53 d = {sigma:.3g} by the fallback of ISO 12107 (a convention, "
+            "not an estimate: the step is probably too large for the spread)"
+        )
+    else:
+        rule = "none (M < 0.3)"
+        reasons.append(
+            f"M = (NB - A^2)/N^2 = {m_stat:.3g} < 0.3: Dixon-Mood's spread formula does not "
+            "apply (sigma is NaN; small_m='iso12107' gives ISO 12107's 0.53 d); the step is "
+            "probably too large for the spread"
         )
     if n_used < min_count:
         reasons.append(
@@ -949,9 +1040,9 @@ def updown(
             f"large-sample formulas are used here only from N >= {min_count}"
         )
     return UpDownResult(
-        h50=math.exp(mu), sigma=sigma, valid=not reasons, reasons=reasons, mu=mu, step=step,
+        h50=back(mu), sigma=sigma, valid=not reasons, reasons=reasons, mu=mu, step=step,
         outcome_used="go" if use_go else "no-go", n_used=n_used, a_sum=a_sum, b_sum=b_sum,
-        m_statistic=m_stat,
+        m_statistic=m_stat, scale=scale, sigma_rule=rule,
     )
 
 
