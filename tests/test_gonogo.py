@@ -82,7 +82,7 @@ def _independent_profile(heights, went, q_log, z):
 
 @pytest.mark.parametrize("p", [0.5, 0.1, 0.9])
 def test_profile_bounds_sit_where_the_likelihood_ratio_reaches_chi2(p):
-    fit = fit_probit(HEIGHTS, WENT)
+    fit = fit_probit(HEIGHTS, WENT, interval="profile")
     estimate, low, high = fit.quantile(p)
     assert low < estimate < high
     z = stats.norm.ppf(p)
@@ -103,11 +103,12 @@ def test_probability_is_half_at_h50_and_rises():
 def test_open_ended_interval_is_reported_not_clipped():
     # four drops, outcomes alternating: the slope is not significant, so the likelihood never
     # falls by the critical value however far the median moves
-    fit = fit_probit([1.0, 2.0, 3.0, 4.0], [0, 1, 0, 1])
-    assert fit.exists
-    estimate, low, high = fit.quantile(0.5)
-    assert 1.0 < estimate < 4.0
-    assert (low, high) == (0.0, math.inf)
+    for interval in ("profile", "fieller"):
+        fit = fit_probit([1.0, 2.0, 3.0, 4.0], [0, 1, 0, 1], interval=interval)
+        assert fit.exists
+        estimate, low, high = fit.quantile(0.5)
+        assert 1.0 < estimate < 4.0
+        assert (low, high) == (0.0, math.inf)
     assert fit.sigma_interval()[1] == math.inf
 
 
@@ -470,7 +471,7 @@ def test_profile_interval_coverage_on_simulated_updown_sequences():
         heights = np.round(heights, 3)  # heights as recorded, to three decimals
         if went.all() or not went.any():
             continue
-        fit = fit_probit(heights, went)
+        fit = fit_probit(heights, went, interval="profile")
         _, low, high = fit.quantile(0.5)
         hit = low <= 10.0 <= high
         if fit.exists:
@@ -572,7 +573,7 @@ def test_open_bound_is_inf_not_an_overflow():
         # log-likelihood of the data in a sequence (no binomial coefficient) at constant p
         limit -= math.log(math.comb(went.size, int(went.sum())))
         assert 2.0 * (fit.loglik - limit) < CHI2_95  # so both sides are open for H50
-    estimate, low, high = fit.quantile(0.5)
+    estimate, low, high = fit_probit(OPEN_HEIGHTS, OPEN_WENT, interval="profile").quantile(0.5)
     assert 1.5 < estimate < 2.5
     assert (low, high) == (0.0, math.inf)
 
@@ -589,12 +590,13 @@ def _no_bound_search_raises(n_sequences, seed):
         heights = np.round(heights, int(rng.integers(3, 7)))
         if went.all() or not went.any():
             continue
-        fit = fit_probit(heights, went)
         n_fits += 1
-        for p in (0.01, 0.5, 0.9):
-            estimate, low, high = fit.quantile(p)  # must not raise
-            assert not (low > high), (p, low, high)
-            n_open += high == math.inf
+        for interval in ("profile", "fieller"):
+            fit = fit_probit(heights, went, interval=interval)
+            for p in (0.01, 0.5, 0.9):
+                estimate, low, high = fit.quantile(p)  # must not raise
+                assert not (low > high), (p, low, high)
+                n_open += high == math.inf
         s_low, s_high = fit.sigma_interval()
         assert not (s_low > s_high)
     assert n_open > 0  # the sample does reach open bounds, the case that used to raise
