@@ -24,14 +24,11 @@ from typing import NamedTuple
 import numpy as np
 from scipy import optimize, stats
 
-from skidmc.analysis.rare_events import (
-    GaussianCopulaTransform,
-    _bad,
-    _check_positive_float,
-    _check_positive_int,
-    _check_seed,
-    _normal_interval,
-)
+from skidmc.analysis.checks import bad as _bad
+from skidmc.analysis.checks import check_positive_float as _check_positive_float
+from skidmc.analysis.checks import check_positive_int as _check_positive_int
+from skidmc.analysis.checks import check_seed as _check_seed
+from skidmc.analysis.rare_events import GaussianCopulaTransform, _normal_interval
 
 __all__ = ["DropHeightResult", "Share", "drop_height_probability"]
 

@@ -13,8 +13,10 @@ Methods (see ``docs/rare-events.md`` for the assumptions and the literature):
 * ``"mc"``: plain Monte Carlo in batches; exact binomial (Clopper-Pearson) interval.
 * ``"subset"``: subset simulation (Au & Beck 2001) with the component-wise (modified) Metropolis
   sampler, p0 = 0.1; independent runs are averaged until the target CoV or the budget is reached.
-* ``"form-is"``: design point(s) by SLSQP on a batched finite-difference gradient, then importance
-  sampling with standard normals shifted to the design point(s).
+* ``"form-is"``: design point(s) by SLSQP on a batched finite-difference gradient (further ones
+  searched from probes and from failures found while sampling), then importance sampling with
+  standard normals shifted to the design point(s); its result is checked (weights, failures far
+  from every design point, curvature) and says in ``warnings`` when it may be wrong.
 """
 
 from __future__ import annotations
@@ -297,8 +299,12 @@ class RareEventResult:
     design_points : (k, d) numpy.ndarray or None
         All design points found (form-is), physical units, in order of increasing beta.
     warnings : tuple of str
-        Caveats found on the way (other failure branches, optimiser trouble); each is also
-        issued as a RuntimeWarning.
+        Caveats in words, each also issued as a RuntimeWarning: other failure branches,
+        optimiser trouble, and for form-is every failed check of its result (failures far
+        from every design point, importance weights with a small effective sample size or an
+        infinite-variance tail, a strongly curved limit state at a design point), followed by
+        the advice to use subset simulation where one fails. A report of the result should
+        print them.
     """
 
     probability: float
