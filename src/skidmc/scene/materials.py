@@ -21,7 +21,24 @@ Sources
 - ASTM D2442 / IEC 60672-3 alumina grades, typical values as compiled in Shackelford & Doremus
   (eds.), *Ceramic and Glass Materials: Structure, Properties and Processing* (Springer, 2008).
 - USDA Forest Products Laboratory, *Wood Handbook*, FPL-GTR-190 (2010), ch. 4 (thermal
-  properties of wood).
+  properties of wood) and ch. 5, Table 5-3a (side hardness, Janka, at 12 % moisture; compression
+  perpendicular to the grain).
+- ACI 318-19, *Building Code Requirements for Structural Concrete*, Sec. 22.8 (bearing strength
+  of concrete under a loaded area smaller than the support: 0.85 f'c sqrt(A2/A1), at most
+  2 x 0.85 f'c), and ACI 302.1R, *Guide to Concrete Floor and Slab Construction* (floor slabs
+  specified at about 3000-5000 psi).
+- Tabor, *The Hardness of Metals* (Oxford, 1951): the mean pressure of a fully plastic
+  indentation is the indentation hardness, about 3 times the uniaxial flow stress.
+
+Hardness (``target.hardness``, docs/model.md "Targets softer than the billet"): the billet's
+flow stress in the report is 28,000 psi (193 MPa; 34,400 psi, 237 MPa, in its second series).
+Metals, ceramics, glasses and rock indent at pressures far above that (Vickers hardness of
+plain carbon steel and aluminium 2024-T6 about 1.2-2 GPa, copper 0.4-0.9 GPa, soda-lime glass
+about 5.5 GPa, fused silica about 9 GPa, alumina 12-20 GPa; granite's uniaxial crushing
+strength 130-250 MPa, its confined indentation pressure several times that): they are
+``"rigid"``, the report's target, and nothing changes for them. Annealed pure gold is the
+closest, about 250 MPa (Vickers 25), still above both series' billets; electroplated gold, the
+report's, is harder.
 """
 
 from __future__ import annotations
@@ -45,7 +62,15 @@ __all__ = [
 MATERIAL_KEY = "target"
 
 #: The scene keys a material sets.
-TARGET_KEYS: tuple[str, ...] = ("target.density", "target.heat_capacity", "target.conductivity")
+TARGET_KEYS: tuple[str, ...] = ("target.density", "target.heat_capacity", "target.conductivity",
+                                "target.hardness")
+
+
+#: Why a metal, ceramic, glass or rock is "rigid" (the module docstring gives the values).
+RIGID_REASON = ("indentation hardness far above any billet's flow stress (metals 0.25-2 GPa, "
+                "glasses and ceramics 5-20 GPa, granite's confined crushing pressure several "
+                "times its 130-250 MPa uniaxial strength; the report's billets 193-237 MPa): "
+                "the report's rigid target")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,6 +90,16 @@ class Material:
         Book (or report) and table the three values come from.
     spread : str
         How far other sources, grades or conditions move the values.
+    hardness : str
+        The contact pressure at which the target yields under the billet (``target.hardness``)
+        [pressure]: a unit string for a material softer than some billets (its indentation
+        hardness or confined crushing strength), ``"rigid"`` for one whose hardness lies far above
+        any billet's flow stress (metals, ceramics, glasses, rock: the report's rigid target),
+        ``"elastic"`` for one that deforms elastically to large strains without yielding
+        (rubber), which the plastic-contact model cannot describe.
+    hardness_source : str
+        Where the hardness (or the reason for ``"rigid"`` / ``"elastic"``) comes from, and its
+        spread.
     """
 
     name: str
@@ -74,11 +109,20 @@ class Material:
     conductivity: str
     source: str
     spread: str
+    hardness: str = "rigid"
+    hardness_source: str = RIGID_REASON
 
     @property
     def values(self) -> dict[str, str]:
-        """The scene overrides: :data:`TARGET_KEYS` -> unit strings."""
-        return dict(zip(TARGET_KEYS, (self.density, self.heat_capacity, self.conductivity)))
+        """The scene overrides: :data:`TARGET_KEYS` -> unit strings (or ``"rigid"``,
+        ``"elastic"`` for the hardness)."""
+        return dict(zip(TARGET_KEYS, (self.density, self.heat_capacity, self.conductivity,
+                                      self.hardness)))
+
+    @property
+    def elastic(self) -> bool:
+        """Whether the material is elastic (``hardness == "elastic"``): refused by the solver."""
+        return self.hardness == "elastic"
 
 
 _INCROPERA = ("Incropera, DeWitt, Bergman & Lavine, Fundamentals of Heat and Mass Transfer, "
@@ -171,7 +215,13 @@ _ENTRIES: tuple[Material, ...] = (
         "2300 kg/m^3", "880 J/(kg K)", "1.4 W/(m K)",
         f"{_INCROPERA}, Table A.3 (concrete (stone mix), 300 K)",
         "aggregate and moisture move k by tens of percent; c 850-1150 J/(kg K) (Callister, "
-        "Table B.8)."),
+        "Table B.8).",
+        "6800 psi",
+        ("ACI 318-19 Sec. 22.8: bearing strength 2 x 0.85 f'c under a small loaded area, with "
+        "f'c = 4000 psi, a usual specified strength of floor slabs (ACI 302.1R); "
+        "f'c 3000-5000 psi gives 35-59 MPa; the unconfined crushing strength f'c itself "
+        "(21-34 MPa) is the lower bound; a higher pressure heats more, so the confined value is "
+        "the conservative choice")),
     Material(
         "granite", "granite (Barre)",
         "2630 kg/m^3", "775 J/(kg K)", "2.79 W/(m K)",
@@ -183,19 +233,38 @@ _ENTRIES: tuple[Material, ...] = (
         "720 kg/m^3", "1255 J/(kg K)", "0.16 W/(m K)",
         f"{_INCROPERA}, Table A.3 (structural building materials, hardwoods (oak, maple))",
         "k varies about 20 % between species and rises with density and moisture; along the "
-        "grain it is 1.5-2.8 times the value across (USDA Wood Handbook, FPL-GTR-190, ch. 4)."),
+        "grain it is 1.5-2.8 times the value across (USDA Wood Handbook, FPL-GTR-190, ch. 4).",
+        "60 MPa",
+        ("USDA Wood Handbook, FPL-GTR-190 (2010), Table 5-3a: side (Janka) hardness of white "
+        "oak 6.0 kN at 12 % moisture, the load that embeds an 11.28-mm ball to half its "
+        "diameter, i.e. over a projected area of 1 cm^2: 60 MPa mean pressure; "
+        "northern red oak 5.7 kN (57 MPa), sugar maple 6.4 kN (64 MPa), same table; "
+        "compression perpendicular to the grain yields first at about 7 MPa (proportional "
+        "limit, same table), and the Janka pressure includes the densification after it; the "
+        "higher pressure heats more, so it is the conservative choice")),
     Material(
         "pine", "softwood (fir, pine), across the grain",
         "510 kg/m^3", "1380 J/(kg K)", "0.12 W/(m K)",
         f"{_INCROPERA}, Table A.3 (structural building materials, softwoods (fir, pine))",
         "as oak: about 20 % between species, 1.5-2.8 times higher along the grain (USDA Wood "
-        "Handbook, ch. 4)."),
+        "Handbook, ch. 4).",
+        "32 MPa",
+        ("USDA Wood Handbook, FPL-GTR-190 (2010), Table 5-3a: side (Janka) hardness of "
+        "Douglas-fir (coast) 3.2 kN at 12 % moisture over a projected area of 1 cm^2; "
+        "loblolly pine 3.1 kN, ponderosa pine 2.0 kN, eastern white pine 1.7 kN (17 MPa), same "
+        "table; the hardest common softwood is the conservative choice")),
     Material(
         "rubber", "soft vulcanized rubber (as a rubber floor covering)",
         "1100 kg/m^3", "2010 J/(kg K)", "0.13 W/(m K)",
         f"{_INCROPERA}, Table A.3 (rubber, vulcanized, soft, 300 K)",
         "hard rubber 1190 kg/m^3 and 0.16 W/(m K) (same table); fillers in floor tiles raise "
-        "density and k."),
+        "density and k.",
+        "elastic",
+        ("soft vulcanized rubber deforms elastically to strains of several hundred percent "
+        "(Young's modulus about 1-10 MPa) and does not flow plastically at a contact pressure; "
+        "refused by the solver: the report's model (constant-pressure plastic contact, "
+        "heat from sliding at that pressure) does not describe an elastic mat, which a "
+        "billet's impact compresses through to the floor beneath")),
 )
 
 #: Name -> :class:`Material`, in the order above.

@@ -29,8 +29,10 @@ from skidmc.errors import MissingKeyError, SceneError, UnknownKeyError
 from skidmc.scene.keys import (
     BETWEEN_KEYS,
     CONFIGURATIONS,
+    DEFAULT_TARGET_HARDNESS,
     DESCRIPTIONS,
     FIELDS,
+    INFINITE_OK,
     INPUT_KEYS,
     NUMERIC_KEYS,
     PARTNERS,
@@ -75,6 +77,10 @@ def _fields_from_input_keys(cls: type) -> type:
     float or str) and the docstring's Attributes section, before :func:`dataclasses.dataclass`
     makes it a dataclass: the table is the one definition of the fields."""
     cls.__annotations__ = {k.field: k.type_name for k in INPUT_KEYS}
+    # The last key, the target's hardness, defaults to the report's rigid target, so that a
+    # scene written without it (Scene(...) by hand, the report's presets) means what it did.
+    assert INPUT_KEYS[-1].key == "target.hardness"
+    cls.target_hardness = DEFAULT_TARGET_HARDNESS
     lines = []
     for k in INPUT_KEYS:
         unit = f" [{k.si_unit}]" if k.numeric else ""
@@ -119,7 +125,7 @@ class Scene:
                     "unit strings",
                 )
             x = float(value)
-            if not math.isfinite(x):
+            if not (math.isfinite(x) or (key in INFINITE_OK and x == math.inf)):
                 raise SceneError(key, value, "must be finite")
             if not in_bounds(key, x):
                 raise SceneError(key, value, bound_reason(key))
@@ -289,6 +295,9 @@ def make_scene(
         elif values["configuration"] == "pendulum" and base.get("configuration") != "pendulum":
             values["tilt"] = 0.0
 
+    # A scene that does not name the target's hardness (the report's presets) has the report's
+    # rigid target.
+    values.setdefault("target.hardness", DEFAULT_TARGET_HARDNESS)
     missing = [key for key in SCENE_KEYS if key not in values]
     if missing:
         raise MissingKeyError(

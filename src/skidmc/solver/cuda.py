@@ -156,7 +156,7 @@ def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", 
 
     Parameters
     ----------
-    rows : ndarray, shape (n, 18)
+    rows : ndarray, shape (n, 19)
         Scenes as rows of SI floats in the order of :data:`skidmc.solver.fast.SCENE_FIELDS`
         (already validated: :class:`skidmc.scene.Scene` ranges).
     rtol : float
@@ -191,8 +191,8 @@ def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", 
     if not (0.0 < h_min < h_max):
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
     rows = np.ascontiguousarray(rows, dtype=np.float64)
-    if rows.ndim != 2 or rows.shape[1] != 18:
-        raise ValueError(f"rows must have shape (n, 18), got {rows.shape}")
+    if rows.ndim != 2 or rows.shape[1] != 19:
+        raise ValueError(f"rows must have shape (n, 19), got {rows.shape}")
     runaway = DEFAULT_RUNAWAY_FRACTION if runaway_fraction is None else float(runaway_fraction)
     level, width, spread, x_tol = _plan(float(rtol))
     args = (float(rtol), float(h_min), float(h_max), float(level), float(width), float(spread),

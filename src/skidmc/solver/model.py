@@ -44,6 +44,7 @@ __all__ = [
     "SELF_HEATING_TIME",
     "SkidModel",
     "build_model",
+    "elastic_target_reason",
     "estimated_reaction_zone",
     "flux_extension",
     "ignition_temperature",
@@ -123,7 +124,30 @@ FLAG_MEANINGS: dict[str, str] = {
     "long_slide": f"the contact slides over more than {LONG_SLIDE_DIAMETERS:g} contact "
                   "diameter(s) while heating: fresh cold target is ignored, so the real height "
                   "is higher (the model is conservative)",
+    "yielding_target": "the target yields below the billet's flow stress: the contact "
+                       "pressure is the target's hardness (longer, gentler contact, less "
+                       "frictional heat; docs/model.md, targets softer than the billet)",
 }
+
+
+def elastic_target_reason(scene):
+    """Why the solver refuses a scene's target, or None: an elastic target
+    (``target.hardness`` = 0, ``"elastic"``, the registry's rubber).
+
+    The report's impact is plastic at a constant contact pressure (Sec. II.B) and its heat is
+    friction at that pressure (Eq. 1). An elastomer does not flow: its contact pressure grows
+    with its compression (Hertz, then the mat's thickness bottoming out on the floor beneath),
+    the billet rebounds elastically, and the heat comes partly from the rubber's hysteresis.
+    None of Eqs. (2)-(10) describes that, so no height is given rather than a number the model
+    cannot support.
+    """
+    if scene.target_hardness > 0.0:
+        return None
+    return ("an elastic target (rubber) cannot be described by the report's plastic-contact "
+            "model (constant contact pressure, Sec. II.B; heat mu p V_r, Eq. 1): its pressure "
+            "grows with compression until a mat bottoms out on the floor beneath, and the "
+            "billet rebounds elastically; give the floor beneath (e.g. target = \"concrete\") "
+            "or a yield pressure (target.hardness) to bound it")
 
 
 @dataclass(frozen=True)
@@ -354,7 +378,12 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         raise SceneError("target", target, 'must be "mesh" or "exact"')
     if resolution is None:
         resolution = resolution_for_level(level, melt_width, melt_spread)
-    sigma = scene.flow_stress
+    reason = elastic_target_reason(scene)
+    if reason is not None:
+        raise SceneError("target.hardness", scene.target_hardness, reason)
+    # The contact pressure: the billet's flow stress on a rigid target, the target's hardness
+    # where it yields first (docs/model.md, "Targets softer than the billet").
+    sigma = mechanics.contact_pressure(scene.flow_stress, scene.target_hardness)
     mass = scene.billet_mass
     diameter = scene.billet_diameter
     mu = scene.mu
@@ -369,6 +398,8 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     flags = []
     if scene.tilt > 0.0:
         terms.append("normal_force_spin")
+    if sigma < scene.flow_stress:
+        flags.append("yielding_target")
     if exit_kind == "stops_sliding":
         flags.append("stops_sliding")
         if t_exit < EARLY_STOP_FRACTION * t_c:
