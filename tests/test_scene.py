@@ -169,7 +169,8 @@ FULL = {  # a complete scene in SI floats (the first-series quartz values)
 def test_make_scene_without_preset_from_si_floats():
     scene = make_scene(FULL)
     assert scene.tilt == 0.0  # pendulum default
-    assert scene.as_dict() == {**FULL, "tilt": 0.0, "target.hardness": math.inf} and list(scene.as_dict()) == list(SCENE_KEYS)
+    assert scene.as_dict() == {**FULL, "tilt": 0.0, "target.hardness": math.inf}
+    assert list(scene.as_dict()) == list(SCENE_KEYS)
 
 
 def test_nested_mapping_as_from_toml_equals_dotted():
