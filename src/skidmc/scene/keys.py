@@ -224,6 +224,15 @@ INPUT_KEYS: tuple[InputKey, ...] = (
         "replaces sigma in omega (Sec. II.B) and Eqs. (1), (5) where p_t < sigma "
         "(docs/model.md, \"Targets softer than the billet\")", "MPa",
         " (\"rigid\" for inf, \"elastic\" for 0)"),
+    InputKey(
+        "target.layers", "-", None, None,
+        "layers beneath the target's top layer (whose properties are the target.* keys): the "
+        "top layer's thickness [m], then density [kg/m^3], heat capacity [J/(kg K)], "
+        "conductivity [W/(m K)] and thickness [m] of each deeper layer, the last without a "
+        "thickness (semi-infinite), separated by '|'; empty for a homogeneous target. Set by "
+        "a stack: target = \"gold 3 mil / copper 7 mil / aluminium-2024\"", "-",
+        "Eq. (12) per layer; report Sec. III (the gold target: 3 mil gold on 7 mil copper on "
+        "Dural); docs/targets.md"),
 )
 
 #: Keys that may hold +inf (every other numeric key must be finite).

@@ -45,12 +45,23 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
+import re
 from collections.abc import Mapping
 
 from skidmc.errors import SceneError
+from skidmc.scene.keys import SI_UNITS
+from skidmc.scene.units import to_si
 
 __all__ = [
     "MATERIALS",
+    "STACKS",
+    "STACK_SEPARATOR",
+    "Stack",
+    "format_layers",
+    "is_stack",
+    "parse_layers",
+    "target_values",
     "MATERIAL_KEY",
     "TARGET_KEYS",
     "Material",
@@ -302,4 +313,167 @@ def get_material(name: object) -> Material:
     close = difflib.get_close_matches(name.strip().lower(), list(MATERIALS), n=3, cutoff=0.5)
     hint = ("did you mean " + " or ".join(repr(c) for c in close) + "? ") if close else ""
     raise SceneError(MATERIAL_KEY, name,
-                     f"unknown material; {hint}materials: " + ", ".join(MATERIALS))
+                     f"unknown material; {hint}materials: " + ", ".join(MATERIALS)
+                     + "; stacks: " + ", ".join(STACKS) + " (or layers written 'gold 3 mil / "
+                     "copper 7 mil / aluminium-2024')")
+
+
+# --- layered targets (docs/targets.md) -----------------------------------------------------------
+
+#: The pseudo-key's separator between layers of a stack: a slash with spaces around it (unit
+#: strings such as "kg/m^3" have none).
+STACK_SEPARATOR = " / "
+
+_SPLIT = re.compile(r"\s+/\s+")
+_MIL = re.compile(r"\bmils?\b")
+
+
+@dataclasses.dataclass(frozen=True)
+class Stack:
+    """A named layered target.
+
+    Attributes
+    ----------
+    name : str
+        Registry name, the value of ``target = ...``.
+    layers : str
+        The stack as it would be written (``"gold 3 mil / copper 7 mil / aluminium-2024"``).
+    description, source : str
+        What it is, and where its layers and thicknesses come from.
+    """
+
+    name: str
+    layers: str
+    description: str
+    source: str
+
+
+_STACK_ENTRIES: tuple[Stack, ...] = (
+    Stack(
+        "gold-stack-report", "gold 3 mil / copper 7 mil / aluminium-2024",
+        "the report's gold target: 3 mil (76 um) of gold electroplated on 7 mil (178 um) of "
+        "copper on a 0.25-in. Dural sheet (taken semi-infinite: it is 35 times the copper's "
+        "heated depth)",
+        f"{_REPORT}, Sec. III (the targets); layer properties from the registry's gold, "
+        "copper and aluminium-2024 (Incropera Table A.1; the Dural's temper is not given, "
+        "see aluminium-2024's spread)"),
+)
+
+#: Name -> :class:`Stack`.
+STACKS: Mapping[str, Stack] = {s.name: s for s in _STACK_ENTRIES}
+
+
+def _layer_values(text: str, last: bool) -> tuple[dict[str, str], float]:
+    """One layer of a stack: (the four target keys -> unit strings, thickness [m] or inf)."""
+    text = text.strip()
+    brace = re.fullmatch(r"\{([^}]*)\}\s*(.*)", text)
+    if brace is not None:
+        props = [p.strip() for p in brace[1].split(",")]
+        if len(props) != 3:
+            raise SceneError(MATERIAL_KEY, text, "explicit layer properties are written "
+                             "{density, heat capacity, conductivity} with units, e.g. "
+                             "{8933 kg/m^3, 385 J/(kg K), 401 W/(m K)} 7 mil")
+        values = dict(zip(TARGET_KEYS, (*props, "rigid")))
+        rest = brace[2].strip()
+    else:
+        name, _, rest = text.partition(" ")
+        values = get_material(name).values
+        rest = rest.strip()
+    if last:
+        if rest:
+            raise SceneError(MATERIAL_KEY, text, "the last layer of a stack is semi-infinite: "
+                             "give it no thickness")
+        return values, math.inf
+    if not rest:
+        raise SceneError(MATERIAL_KEY, text, "every layer but the last needs a thickness, "
+                         "e.g. 'gold 3 mil'")
+    thickness = to_si(MATERIAL_KEY, _MIL.sub("thou", rest), "m")  # pint's "mil" is an angle
+    if not (math.isfinite(thickness) and thickness > 0.0):
+        raise SceneError(MATERIAL_KEY, text, "a layer's thickness must be > 0")
+    return values, thickness
+
+
+def format_layers(top_thickness: float, deeper: list[tuple[float, float, float, float]]
+                  ) -> str:
+    """The canonical ``target.layers`` text (SI, exact float reprs): ``"d1 | rho c k d | ... |
+    rho c k"``."""
+    parts = [repr(float(top_thickness))]
+    for rho, c, k, d in deeper:
+        nums = [rho, c, k] + ([d] if math.isfinite(d) else [])
+        parts.append(" ".join(repr(float(x)) for x in nums))
+    return " | ".join(parts)
+
+
+def parse_layers(text: str) -> tuple[float, tuple[tuple[float, float, float, float], ...]]:
+    """``target.layers`` -> (top thickness [m], deeper layers (rho [kg/m^3], c [J/(kg K)],
+    k [W/(m K)], thickness [m], inf for the last)).
+
+    Raises
+    ------
+    SceneError
+        Not the canonical form (:func:`format_layers`), or a value not finite and positive.
+    """
+    key = "target.layers"
+    parts = [p.strip() for p in text.split("|")]
+    try:
+        top = float(parts[0])
+        rows = [tuple(float(x) for x in p.split()) for p in parts[1:]]
+    except ValueError:
+        raise SceneError(key, text, "expected 'd1 | rho c k d | ... | rho c k' in SI units "
+                         "(name a stack with target = \"gold 3 mil / copper 7 mil / "
+                         "aluminium-2024\")") from None
+    if not rows:
+        raise SceneError(key, text, "a stack needs at least one layer beneath the top")
+    deeper = []
+    for i, row in enumerate(rows):
+        last = i == len(rows) - 1
+        if len(row) != (3 if last else 4):
+            raise SceneError(key, text, f"layer {i + 2} needs density, heat capacity, "
+                             "conductivity" + ("" if last else " and thickness")
+                             + (" (the last layer is semi-infinite: no thickness)" if last
+                                else ""))
+        deeper.append(row + ((math.inf,) if last else ()))
+    for x in (top, *(v for row in deeper for v in row)):
+        if not (x > 0.0 and not math.isnan(x)):
+            raise SceneError(key, text, "every value must be > 0")
+    if not math.isfinite(top) or any(not math.isfinite(v) for row in deeper for v in row[:3]):
+        raise SceneError(key, text, "every value must be finite")
+    return top, tuple(deeper)
+
+
+def is_stack(name: object) -> bool:
+    """Whether ``target = name`` names a stack (a registry stack, or layers written with
+    :data:`STACK_SEPARATOR`)."""
+    return isinstance(name, str) and (name in STACKS or _SPLIT.search(name.strip()) is not None)
+
+
+def target_values(name: object) -> dict[str, str | float]:
+    """The scene values ``target = name`` sets: the four target keys of the (top) material, as
+    unit strings, and ``target.layers`` (canonical text; empty for one material).
+
+    Parameters
+    ----------
+    name : str
+        A material (:data:`MATERIALS`), a stack (:data:`STACKS`), or a stack written out:
+        layers from the surface down separated by " / ", each a material name or
+        ``{density, heat capacity, conductivity}`` with units, followed by its thickness; the
+        last layer without one (semi-infinite): ``"gold 3 mil / copper 7 mil /
+        aluminium-2024"`` ("mil" is a thousandth of an inch).
+
+    Raises
+    ------
+    SceneError
+        Unknown names, a missing or extra thickness (key ``target``).
+    """
+    if not is_stack(name):
+        return {**get_material(name).values, "target.layers": ""}
+    text = STACKS[name].layers if name in STACKS else name.strip()
+    parts = _SPLIT.split(text)
+    layers = [_layer_values(p, i == len(parts) - 1) for i, p in enumerate(parts)]
+    deeper = []
+    for values, thickness in layers[1:]:
+        rho, c, k = (to_si(key, values[key], SI_UNITS[key]) for key in TARGET_KEYS[:3])
+        deeper.append((rho, c, k, thickness))
+    top_values, top_thickness = layers[0]
+    return {**top_values, "target.layers": format_layers(top_thickness, deeper)}
+

@@ -44,7 +44,7 @@ from skidmc.scene.keys import (
     implausible_reason,
     in_bounds,
 )
-from skidmc.scene.materials import MATERIAL_KEY, get_material
+from skidmc.scene.materials import MATERIAL_KEY, format_layers, parse_layers, target_values
 from skidmc.scene.presets import PRESETS
 from skidmc.scene.units import read_si
 
@@ -79,13 +79,14 @@ def _fields_from_input_keys(cls: type) -> type:
     cls.__annotations__ = {k.field: k.type_name for k in INPUT_KEYS}
     # The last key, the target's hardness, defaults to the report's rigid target, so that a
     # scene written without it (Scene(...) by hand, the report's presets) means what it did.
-    assert INPUT_KEYS[-1].key == "target.hardness"
+    assert [k.key for k in INPUT_KEYS[-2:]] == ["target.hardness", "target.layers"]
     cls.target_hardness = DEFAULT_TARGET_HARDNESS
+    cls.target_layers = ""  # a homogeneous target
     lines = []
     for k in INPUT_KEYS:
         unit = f" [{k.si_unit}]" if k.numeric else ""
         text = k.description[0].upper() + k.description[1:]
-        if not k.numeric:
+        if k.key == "configuration":
             text += ": " + " or ".join(f"``{c!r}``" for c in CONFIGURATIONS)
         lines += [f"    {k.field} : {k.type_name}", f"        {text}{unit}."]
     if cls.__doc__:  # None under python -OO
@@ -130,6 +131,11 @@ class Scene:
             if not in_bounds(key, x):
                 raise SceneError(key, value, bound_reason(key))
             object.__setattr__(self, field, x)
+        if not isinstance(self.target_layers, str):
+            raise SceneError("target.layers", self.target_layers, "expected a string (empty for "
+                             "a homogeneous target)")
+        if self.target_layers:
+            parse_layers(self.target_layers)
         if self.configuration not in CONFIGURATIONS:
             raise SceneError(
                 "configuration", self.configuration,
@@ -212,6 +218,11 @@ def _convert(key: str, value: object) -> tuple[float | str, bool]:
         if not isinstance(value, str):
             raise SceneError(key, value, "must be one of " + ", ".join(map(repr, CONFIGURATIONS)))
         return value.strip().lower(), False
+    if key == "target.layers":
+        if not isinstance(value, str):
+            raise SceneError(key, value, "expected a string (set it with a stack: target = "
+                             "\"gold 3 mil / copper 7 mil / aluminium-2024\")")
+        return (format_layers(*parse_layers(value)) if value.strip() else ""), False
     return read_si(key, value, SI_UNITS[key])
 
 
@@ -279,7 +290,7 @@ def make_scene(
     given.update(_flatten(overrides))  # keyword overrides win over the mapping
     values = dict(base)
     if MATERIAL_KEY in given:  # before the keys given: an explicit target.* key wins
-        for key, text in get_material(given.pop(MATERIAL_KEY)).values.items():
+        for key, text in target_values(given.pop(MATERIAL_KEY)).items():
             values[key] = _convert(key, text)[0]
     bare = []
     for key, raw in given.items():
@@ -298,6 +309,7 @@ def make_scene(
     # A scene that does not name the target's hardness (the report's presets) has the report's
     # rigid target.
     values.setdefault("target.hardness", DEFAULT_TARGET_HARDNESS)
+    values.setdefault("target.layers", "")
     missing = [key for key in SCENE_KEYS if key not in values]
     if missing:
         raise MissingKeyError(

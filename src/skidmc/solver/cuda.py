@@ -278,7 +278,11 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     censor_names = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
     results = []
     for scene, o in zip(scenes, out):
-        if o[device.OUT_STATUS] != device.STATUS_OK:
+        # The device's target is homogeneous: a stack whose heat reaches below its top layer
+        # goes to the fallback (the CPU search meshes its layers).
+        layered = bool(scene.target_layers) and "layered_target" in build_model(
+            scene, meshes=False, melting=melting, **extra).terms
+        if layered or o[device.OUT_STATUS] != device.STATUS_OK:
             try:
                 results.append(fallback(scene, rtol=rtol, h_min=h_min, h_max=h_max,
                                         melting=melting, **extra))

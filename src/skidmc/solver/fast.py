@@ -174,6 +174,9 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
     # Terms and validity flags (scene and height) as the full tier infers them, without meshes.
     model = build_model(scene, melting=melting, meshes=False)
+    if "layered_target" in model.terms:
+        raise SceneError("tier", "fast", "the fast tier's target is homogeneous, and this "
+                         "stack's heat reaches below its top layer (use the full tier)")
     error = fast_error_bound(model.flags)
     refused = [f for f in REFUSED_FLAGS if f in model.flags]
     if strict and refused:

@@ -233,7 +233,10 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     if melt_spread is None:
         melt_spread = MELT_SPREAD if adaptive else 0.0
     if target is None:
-        target = "exact" if adaptive else "mesh"
+        # The exact target is homogeneous: a stack whose heat reaches below its top layer is
+        # meshed (docs/targets.md).
+        layered = "layered_target" in build_model(scene, meshes=False).terms
+        target = "exact" if adaptive and not layered else "mesh"
     elif target not in TARGETS:
         raise SceneError("target", target, f"expected one of {', '.join(TARGETS)}")
     signs = adaptive and _margin_likely_jumps(scene)
