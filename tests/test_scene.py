@@ -126,7 +126,8 @@ def test_to_si_refuses_wrong_units(value, unit, fragment):
 def test_vocabulary_tables_cover_every_key():
     assert len(SCENE_KEYS) == 21 == len(set(SCENE_KEYS))
     assert set(SI_UNITS) == set(DESCRIPTIONS) == set(SCENE_KEYS)
-    assert NUMERIC_KEYS == tuple(k for k in SCENE_KEYS if k not in ("configuration", "target.layers"))
+    strings = ("configuration", "target.layers")
+    assert NUMERIC_KEYS == tuple(k for k in SCENE_KEYS if k not in strings)
     assert [f.name for f in dataclasses.fields(Scene)] == [k.replace(".", "_") for k in SCENE_KEYS]
     for key in NUMERIC_KEYS:
         ureg.parse_units(SI_UNITS[key])  # every SI unit string is one pint reads
