@@ -158,3 +158,20 @@ def test_a_thin_top_tends_to_the_substrate_and_the_stack_is_meshed():
         fast_critical_height(thin)
     with pytest.raises(SceneError, match="meshed target"):
         build_model(thin, target="exact")
+
+
+def test_property_tables_reproduce_the_registry_at_300_k():
+    """Incropera Table A.2's 300 K column is the registry's constant value; the ratios the
+    temperature-dependence measurement uses are the table's (alumina's k at 600 K is 44 % of
+    its 300 K value, fused silica's 127 %)."""
+    from skidmc.scene.materials import MATERIALS, PROPERTY_TABLES
+    from skidmc.scene.units import to_si
+
+    for name, table in PROPERTY_TABLES.items():
+        i = table.temperature.index(300.0)
+        m = MATERIALS[name]
+        assert to_si("k", m.conductivity, "W/(m K)") == table.conductivity[i]
+        assert to_si("c", m.heat_capacity, "J/(kg K)") == table.heat_capacity[i]
+        assert table.ratio(300.0) == (1.0, 1.0)
+    assert PROPERTY_TABLES["alumina-99.5"].ratio(600.0)[0] == pytest.approx(15.8 / 36.0)
+    assert PROPERTY_TABLES["fused-quartz"].ratio(600.0)[0] == pytest.approx(1.75 / 1.38)

@@ -49,12 +49,16 @@ import math
 import re
 from collections.abc import Mapping
 
+import numpy as np
+
 from skidmc.errors import SceneError
 from skidmc.scene.keys import SI_UNITS
 from skidmc.scene.units import to_si
 
 __all__ = [
     "MATERIALS",
+    "PROPERTY_TABLES",
+    "PropertyTable",
     "STACKS",
     "STACK_SEPARATOR",
     "Stack",
@@ -280,6 +284,58 @@ _ENTRIES: tuple[Material, ...] = (
 
 #: Name -> :class:`Material`, in the order above.
 MATERIALS: Mapping[str, Material] = {m.name: m for m in _ENTRIES}
+
+
+@dataclasses.dataclass(frozen=True)
+class PropertyTable:
+    """A material's conductivity and heat capacity against temperature, as its source prints
+    them (docs/targets.md, "Temperature-dependent properties").
+
+    Attributes
+    ----------
+    temperature : tuple of float
+        [K].
+    conductivity : tuple of float
+        k [W/(m K)] at each temperature.
+    heat_capacity : tuple of float or None
+        c [J/(kg K)] at each temperature; None where the source gives none.
+    source : str
+    """
+
+    temperature: tuple[float, ...]
+    conductivity: tuple[float, ...]
+    heat_capacity: tuple[float | None, ...]
+    source: str
+
+    def ratio(self, temperature: float, reference: float = 300.0) -> tuple[float, float]:
+        """(k(T) / k(T_ref), c(T) / c(T_ref)), linear interpolation in the table [1]; only the
+        temperatures where the table gives c are used for c."""
+
+        t = np.asarray(self.temperature)
+        k = np.asarray(self.conductivity)
+        have_c = [i for i, c in enumerate(self.heat_capacity) if c is not None]
+        tc = t[have_c]
+        cc = np.asarray([self.heat_capacity[i] for i in have_c])
+        return (float(np.interp(temperature, t, k) / np.interp(reference, t, k)),
+                float(np.interp(temperature, tc, cc) / np.interp(reference, tc, cc)))
+
+
+#: Temperature tables of the registry's materials that have one (Incropera Table A.2; the
+#: 300 K column is the entry's constant value). Used to measure how far the interface's rise
+#: moves a target's properties (scripts/temperature_dependence.py); the model's targets keep
+#: constant properties.
+PROPERTY_TABLES: Mapping[str, PropertyTable] = {
+    "alumina-99.5": PropertyTable(
+        (100.0, 200.0, 300.0, 400.0, 600.0, 800.0, 1000.0, 1200.0, 1500.0, 2000.0),
+        (133.0, 55.0, 36.0, 26.4, 15.8, 10.4, 7.85, 6.55, 5.66, 6.00),
+        (None, None, 765.0, 940.0, 1110.0, 1180.0, 1225.0, None, None, None),
+        f"{_INCROPERA}, Table A.2 (aluminum oxide, polycrystalline)"),
+    "fused-quartz": PropertyTable(
+        (100.0, 200.0, 300.0, 400.0, 600.0, 800.0, 1000.0, 1200.0),
+        (0.69, 1.14, 1.38, 1.51, 1.75, 2.17, 2.87, 4.00),
+        (None, None, 745.0, 905.0, 1040.0, 1105.0, 1155.0, 1195.0),
+        f"{_INCROPERA}, Table A.2 (silicon dioxide, polycrystalline (fused silica))"),
+}
 
 
 def list_materials() -> list[str]:
