@@ -39,7 +39,14 @@ def test_stack_syntax_named_written_and_explicit():
     assert deeper[1] == (2770.0, 875.0, 177.0, math.inf)
     assert format_layers(top, deeper) == named.target_layers
     assert "gold-stack-report" in STACKS
-    # a material resets the layers; the presets are homogeneous
+    # replace() and the ensemble's columns keep the layers; a material resets them; the
+    # presets are homogeneous
+    assert named.replace(mu=0.2).target_layers == named.target_layers
+    from skidmc.scene import SceneColumns
+
+    cols = SceneColumns(named, {"mu": np.array([0.1, 0.2])})
+    assert cols.scene(1).target_layers == named.target_layers
+    assert cols.scene(1) == named.replace(mu=0.2)
     assert named.replace(target="steel").target_layers == ""
     assert make_scene(preset="paper-gold").target_layers == ""
 

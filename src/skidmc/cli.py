@@ -129,8 +129,7 @@ def _cmd_presets(args: argparse.Namespace) -> int:
         for ik in INPUT_KEYS:
             value = values[ik.key]
             shown = value if isinstance(value, str) else f"{value:.6g}"
-            rows.append((ik.key, written.get(ik.key, ""), shown, _unit_label(ik.si_unit),
-                         ik.symbol))
+            rows.append((ik.key, written[ik.key], shown, _unit_label(ik.si_unit), ik.symbol))
         blocks.append(
             f"{name}\n  source: {PRESETS[name]['source']}\n  notes:  {PRESETS[name]['notes']}\n"
             + _table(rows, indent="  ")

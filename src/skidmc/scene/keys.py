@@ -34,6 +34,7 @@ __all__ = [
     "HARDNESS_WORDS",
     "INFINITE_OK",
     "INPUT_KEYS",
+    "LAYERS_KEY",
     "NUMERIC_KEYS",
     "PARTNERS",
     "SCENE_KEYS",
@@ -224,16 +225,15 @@ INPUT_KEYS: tuple[InputKey, ...] = (
         "replaces sigma in omega (Sec. II.B) and Eqs. (1), (5) where p_t < sigma "
         "(docs/model.md, \"Targets softer than the billet\")", "MPa",
         " (\"rigid\" for inf, \"elastic\" for 0)"),
-    InputKey(
-        "target.layers", "-", None, None,
-        "layers beneath the target's top layer (whose properties are the target.* keys): the "
-        "top layer's thickness [m], then density [kg/m^3], heat capacity [J/(kg K)], "
-        "conductivity [W/(m K)] and thickness [m] of each deeper layer, the last without a "
-        "thickness (semi-infinite), separated by '|'; empty for a homogeneous target. Set by "
-        "a stack: target = \"gold 3 mil / copper 7 mil / aluminium-2024\"", "-",
-        "Eq. (12) per layer; report Sec. III (the gold target: 3 mil gold on 7 mil copper on "
-        "Dural); docs/targets.md"),
 )
+
+#: The scene attribute (not an input key: no unit, not sampled, not stored as a column) that
+#: holds a layered target's deeper layers, set with a stack (``target = "gold 3 mil / copper 7
+#: mil / aluminium-2024"``) or directly as canonical SI text: the top layer's thickness [m], then
+#: density [kg/m^3], heat capacity [J/(kg K)], conductivity [W/(m K)] and thickness [m] of each
+#: deeper layer, the last without a thickness (semi-infinite), separated by '|'; empty for a
+#: homogeneous target (docs/targets.md). The top layer's properties are the target.* keys.
+LAYERS_KEY = "target.layers"
 
 #: Keys that may hold +inf (every other numeric key must be finite).
 INFINITE_OK: frozenset[str] = frozenset({"target.hardness"})

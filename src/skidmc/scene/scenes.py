@@ -34,6 +34,7 @@ from skidmc.scene.keys import (
     FIELDS,
     INFINITE_OK,
     INPUT_KEYS,
+    LAYERS_KEY,
     NUMERIC_KEYS,
     PARTNERS,
     SCENE_KEYS,
@@ -64,9 +65,11 @@ __all__ = [
 # Attribute name of each key (dots -> underscores) and back; attribute names are also accepted as
 # keys in overrides, so that ``scene.replace(he_density=1900.0)`` works.
 _FIELD_OF_KEY: dict[str, str] = FIELDS
+_LAYERS_FIELD = LAYERS_KEY.replace(".", "_")
 _KEY_OF_NAME: dict[str, str] = {
     **{field: key for key, field in _FIELD_OF_KEY.items()},
     **{key: key for key in SCENE_KEYS},
+    _LAYERS_FIELD: LAYERS_KEY, LAYERS_KEY: LAYERS_KEY,
 }
 _NUMERIC = frozenset(NUMERIC_KEYS)
 _ATTRIBUTES_MARK = "<attributes from skidmc.scene.keys.INPUT_KEYS>"
@@ -78,9 +81,11 @@ def _fields_from_input_keys(cls: type) -> type:
     makes it a dataclass: the table is the one definition of the fields."""
     cls.__annotations__ = {k.field: k.type_name for k in INPUT_KEYS}
     # The last key, the target's hardness, defaults to the report's rigid target, so that a
-    # scene written without it (Scene(...) by hand, the report's presets) means what it did.
-    assert [k.key for k in INPUT_KEYS[-2:]] == ["target.hardness", "target.layers"]
+    # scene written without it (Scene(...) by hand) means what it did.
+    assert INPUT_KEYS[-1].key == "target.hardness"
     cls.target_hardness = DEFAULT_TARGET_HARDNESS
+    # Not an input key: a layered target's deeper layers (skidmc.scene.keys.LAYERS_KEY).
+    cls.__annotations__[_LAYERS_FIELD] = "str"
     cls.target_layers = ""  # a homogeneous target
     lines = []
     for k in INPUT_KEYS:
@@ -89,6 +94,9 @@ def _fields_from_input_keys(cls: type) -> type:
         if k.key == "configuration":
             text += ": " + " or ".join(f"``{c!r}``" for c in CONFIGURATIONS)
         lines += [f"    {k.field} : {k.type_name}", f"        {text}{unit}."]
+    lines += [f"    {_LAYERS_FIELD} : str",
+              "        A layered target's layers beneath the top (canonical SI text, "
+              "skidmc.scene.keys.LAYERS_KEY); empty for a homogeneous target."]
     if cls.__doc__:  # None under python -OO
         cls.__doc__ = cls.__doc__.replace("    " + _ATTRIBUTES_MARK, "\n".join(lines))
     return cls
@@ -132,7 +140,7 @@ class Scene:
                 raise SceneError(key, value, bound_reason(key))
             object.__setattr__(self, field, x)
         if not isinstance(self.target_layers, str):
-            raise SceneError("target.layers", self.target_layers, "expected a string (empty for "
+            raise SceneError(LAYERS_KEY, self.target_layers, "expected a string (empty for "
                              "a homogeneous target)")
         if self.target_layers:
             parse_layers(self.target_layers)
@@ -206,7 +214,7 @@ def _base_values(preset: str | Scene | None) -> dict:
     if preset is None:
         return {}
     if isinstance(preset, Scene):
-        return preset.as_dict()
+        return {**preset.as_dict(), LAYERS_KEY: preset.target_layers}
     if isinstance(preset, str):
         return get_preset(preset).as_dict()
     raise SceneError("preset", preset, "expected a preset name or a Scene")
@@ -218,7 +226,7 @@ def _convert(key: str, value: object) -> tuple[float | str, bool]:
         if not isinstance(value, str):
             raise SceneError(key, value, "must be one of " + ", ".join(map(repr, CONFIGURATIONS)))
         return value.strip().lower(), False
-    if key == "target.layers":
+    if key == LAYERS_KEY:
         if not isinstance(value, str):
             raise SceneError(key, value, "expected a string (set it with a stack: target = "
                              "\"gold 3 mil / copper 7 mil / aluminium-2024\")")
@@ -294,7 +302,7 @@ def make_scene(
             values[key] = _convert(key, text)[0]
     bare = []
     for key, raw in given.items():
-        if key not in SI_UNITS:
+        if key not in SI_UNITS and key != LAYERS_KEY:
             raise UnknownKeyError(key, raw, [*SCENE_KEYS, MATERIAL_KEY])
         values[key], is_bare = _convert(key, raw)
         if is_bare:
@@ -309,7 +317,7 @@ def make_scene(
     # A scene that does not name the target's hardness (the report's presets) has the report's
     # rigid target.
     values.setdefault("target.hardness", DEFAULT_TARGET_HARDNESS)
-    values.setdefault("target.layers", "")
+    values.setdefault(LAYERS_KEY, "")
     missing = [key for key in SCENE_KEYS if key not in values]
     if missing:
         raise MissingKeyError(
@@ -317,7 +325,8 @@ def make_scene(
             "missing; no value for " + ", ".join(missing) + "; give them or start from a preset",
         )
     try:
-        scene = Scene(**{_FIELD_OF_KEY[key]: values[key] for key in SCENE_KEYS})
+        scene = Scene(**{_FIELD_OF_KEY[key]: values[key] for key in SCENE_KEYS},
+                      target_layers=values[LAYERS_KEY])
     except SceneError as err:
         # Name the value as the user wrote it (not its SI conversion), and for a check between two
         # keys name the one the user gave.
