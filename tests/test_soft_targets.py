@@ -112,3 +112,21 @@ def test_an_elastic_target_is_refused_with_the_reason():
         with pytest.raises(SceneError, match="target.hardness") as info:
             call()
         assert "elastic" in str(info.value) and "plastic-contact" in str(info.value)
+
+
+def test_the_device_search_takes_the_contact_pressure_and_hands_back_what_it_cannot_do():
+    """The GPU search (here its CPU build, skidmc.solver.cuda backend="cpu") reads the
+    hardness column: a yielding floor is, bit for bit, the softer billet on a rigid floor;
+    an elastic floor and a layered target go to the CPU search (the first refused with the
+    reason, the second meshed there)."""
+    from skidmc.solver.cuda import solve_scenes
+
+    soft = make_scene(target="concrete", **FLOOR)
+    same = soft.replace(flow_stress=soft.target_hardness, **{"target.hardness": "rigid"})
+    stack = make_scene(preset="paper-gold", target="gold-stack-report")
+    rubber = make_scene(target="rubber", **FLOOR)
+    a, b, c, d = solve_scenes([soft, same, stack, rubber], backend="cpu", rtol=1e-2)
+    assert a.method == b.method == "device"
+    assert a.critical_height == b.critical_height and "yielding_target" in a.flags
+    assert c.method != "device" and "layered_target" in c.terms
+    assert isinstance(d, SceneError) and "elastic" in str(d)
