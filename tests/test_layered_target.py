@@ -148,7 +148,7 @@ def test_a_thick_top_is_the_homogeneous_top():
     a = critical_height(thick, rtol=1e-2)
     b = critical_height(make_scene(preset="paper-gold", target="copper"), rtol=1e-2)
     assert a.critical_height == b.critical_height  # the same (exact-target) search
-    assert "top_layer_only" in a.terms
+    assert "top_layer_only" in a.terms and "top_layer_only" in a.flags
 
 
 def test_a_thin_top_tends_to_the_substrate_and_the_stack_is_meshed():
@@ -156,7 +156,7 @@ def test_a_thin_top_tends_to_the_substrate_and_the_stack_is_meshed():
     dural = make_scene(preset="paper-gold", target="aluminium-2024")
     a = critical_height(thin, rtol=1e-2)
     b = critical_height(dural, rtol=1e-2, target="mesh")
-    assert "layered_target" in a.terms
+    assert "layered_target" in a.terms and "layered_target" in a.flags
     # 10 nm of gold holds ~1e-4 of the heat the Dural takes in its heated depth (~200 um);
     # the two searches differ only by their meshes' discretisation (each bounded by its
     # estimate), so they agree within the sum of the estimates.

@@ -131,6 +131,10 @@ FLAG_MEANINGS: dict[str, str] = {
     "long_slide": f"the contact slides over more than {LONG_SLIDE_DIAMETERS:g} contact "
                   "diameter(s) while heating: fresh cold target is ignored, so the real height "
                   "is higher (the model is conservative)",
+    "layered_target": "the heat reaches below the target's top layer: the layers are meshed "
+                      "(docs/targets.md)",
+    "top_layer_only": "a layered target whose top layer is thicker than the heat reaches: "
+                      "the homogeneous top layer is used (docs/targets.md)",
     "yielding_target": "the target yields below the billet's flow stress: the contact "
                        "pressure is the target's hardness (longer, gentler contact, less "
                        "frictional heat; docs/model.md, targets softer than the billet)",
@@ -448,9 +452,11 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         top_alpha = layers[1][0] / layers[0][0]
         if layers[2][0] >= DEPTH_DIFFUSION_LENGTHS * math.sqrt(top_alpha * t_end):
             terms.append("top_layer_only")
+            flags.append("top_layer_only")
             layers = None
         else:
             terms.append("layered_target")
+            flags.append("layered_target")
             if target == "exact":
                 raise SceneError("target", target, "the heat reaches below the target's top "
                                  "layer: a layered target needs the meshed target "
