@@ -67,15 +67,18 @@ def materials_table() -> str:
     rows = ["| `target =` | " + " | ".join(f"{key.split('.')[1].replace('_', ' ')} [{unit}]"
                                           for key, unit in zip(TARGET_KEYS, si_units))
             + " | diffusivity [mm^2/s] | material |",
-            "|---|---|---|---|---|---|"]
+            "|---|---|---|---|---|---|---|"]
     for m in MATERIALS.values():
-        rho, c, k = (to_si(key, m.values[key], unit) for key, unit in zip(TARGET_KEYS, si_units))
-        rows.append(f"| `{m.name}` | {rho:.6g} | {c:.4g} | {k:.4g} | {k / (rho * c) * 1e6:.3g} | "
-                    f"{m.description} |")
+        rho, c, k, p = (to_si(key, m.values[key], unit)
+                        for key, unit in zip(TARGET_KEYS, si_units))
+        hardness = m.hardness if m.hardness in ("rigid", "elastic") else f"{p:.3g}"
+        rows.append(f"| `{m.name}` | {rho:.6g} | {c:.4g} | {k:.4g} | {hardness} | "
+                    f"{k / (rho * c) * 1e6:.3g} | {m.description} |")
     rows.append("")
     for m in MATERIALS.values():
         given = ", ".join(m.values.values())
-        rows.append(f"- `{m.name}` ({given}): {m.source}. Spread: {m.spread}")
+        rows.append(f"- `{m.name}` ({given}): {m.source}. Spread: {m.spread} "
+                    f"Hardness: {m.hardness_source}.")
     return "\n".join(rows)
 
 

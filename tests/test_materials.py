@@ -9,6 +9,7 @@ import pytest
 
 from skidmc.errors import SceneError
 from skidmc.scene import MATERIALS, SI_UNITS, get_material, get_preset, list_materials, make_scene
+from skidmc.scene.keys import HARDNESS_WORDS
 from skidmc.scene.materials import TARGET_KEYS
 from skidmc.scene.units import read_si
 
@@ -41,6 +42,10 @@ def test_every_entry_is_sourced_has_units_and_builds_a_scene(name):
     assert list(m.values) == list(TARGET_KEYS)
     si = {}
     for key, text in m.values.items():
+        if key == "target.hardness" and text in HARDNESS_WORDS:  # "rigid" / "elastic"
+            si[key] = HARDNESS_WORDS[text]
+            assert m.hardness_source, f"{name}: the hardness needs a source or reason"
+            continue
         si[key], bare = read_si(key, text, SI_UNITS[key])
         assert not bare, f"{name}: {key} = {text!r} needs units"
     scene = make_scene(preset="paper-quartz", target=name)

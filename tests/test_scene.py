@@ -124,10 +124,11 @@ def test_to_si_refuses_wrong_units(value, unit, fragment):
 
 
 def test_vocabulary_tables_cover_every_key():
-    assert len(SCENE_KEYS) == 19 == len(set(SCENE_KEYS))
+    assert len(SCENE_KEYS) == 20 == len(set(SCENE_KEYS))
     assert set(SI_UNITS) == set(DESCRIPTIONS) == set(SCENE_KEYS)
     assert NUMERIC_KEYS == tuple(k for k in SCENE_KEYS if k != "configuration")
-    assert [f.name for f in dataclasses.fields(Scene)] == [k.replace(".", "_") for k in SCENE_KEYS]
+    assert [f.name for f in dataclasses.fields(Scene)] == [
+        *(k.replace(".", "_") for k in SCENE_KEYS), "target_layers"]
     for key in NUMERIC_KEYS:
         ureg.parse_units(SI_UNITS[key])  # every SI unit string is one pint reads
 
@@ -169,7 +170,8 @@ FULL = {  # a complete scene in SI floats (the first-series quartz values)
 def test_make_scene_without_preset_from_si_floats():
     scene = make_scene(FULL)
     assert scene.tilt == 0.0  # pendulum default
-    assert scene.as_dict() == {**FULL, "tilt": 0.0} and list(scene.as_dict()) == list(SCENE_KEYS)
+    assert scene.as_dict() == {**FULL, "tilt": 0.0, "target.hardness": math.inf}
+    assert list(scene.as_dict()) == list(SCENE_KEYS)
 
 
 def test_nested_mapping_as_from_toml_equals_dotted():

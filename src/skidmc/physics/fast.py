@@ -92,7 +92,12 @@ import numpy as np
 from numba import njit
 from scipy.special import erfc
 
-from skidmc.physics.mechanics import EXIT_STOPS_SLIDING, STANDARD_GRAVITY, impact_constants
+from skidmc.physics.mechanics import (
+    EXIT_STOPS_SLIDING,
+    STANDARD_GRAVITY,
+    contact_pressure,
+    impact_constants,
+)
 from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION
 
 __all__ = [
@@ -337,7 +342,8 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
                        initial_temperature, he_density, he_heat_capacity, he_conductivity,
                        he_heat_of_fusion, he_melting_point, prefactor, activation_temperature,
                        heat_of_reaction, target_density, target_heat_capacity,
-                       target_conductivity, h_min, h_max, c_ign, melt_factor, stops_factor,
+                       target_conductivity, target_hardness, h_min, h_max, c_ign, melt_factor,
+                       stops_factor,
                        table, gl_x, gl_w, n_times):
     """Critical drop height of one scene by the reduced model [m] (module docstring).
 
@@ -359,6 +365,9 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
         Z [1/s], T_a [K], Q [J/kg].
     target_density, target_heat_capacity, target_conductivity : float
         rho2 [kg/m^3], c2 [J/(kg K)], k2 [W/(m K)].
+    target_hardness : float
+        p_t [Pa]: the contact pressure is min(sigma, p_t)
+        (:func:`skidmc.physics.mechanics.contact_pressure`); inf for a rigid target.
     h_min, h_max : float
         Search bounds [m].
     c_ign, melt_factor, stops_factor : float
@@ -388,7 +397,8 @@ def fast_height_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, til
                             initial_temperature, he_density, he_heat_capacity, he_conductivity,
                             he_heat_of_fusion, he_melting_point, prefactor,
                             activation_temperature, heat_of_reaction, target_density,
-                            target_heat_capacity, target_conductivity, h_min, h_max, c_ign,
+                            target_heat_capacity, target_conductivity, target_hardness, h_min,
+                            h_max, c_ign,
                             melt_factor, stops_factor, table, gl_x, gl_w, n_times,
                             np.empty(n_times),
                             np.empty(n_times), np.empty(n_times))
@@ -399,13 +409,15 @@ def fast_height_core(mu, flow_stress, billet_mass, billet_diameter, angle, tilt,
                      initial_temperature, he_density, he_heat_capacity, he_conductivity,
                      he_heat_of_fusion, he_melting_point, prefactor, activation_temperature,
                      heat_of_reaction, target_density, target_heat_capacity,
-                     target_conductivity, h_min, h_max, c_ign, melt_factor, stops_factor,
+                     target_conductivity, target_hardness, h_min, h_max, c_ign, melt_factor,
+                     stops_factor,
                      table, gl_x, gl_w, n_times, times, theta, temp):
     """:func:`fast_height_kernel` on caller-owned work arrays ``times``, ``theta``, ``temp``
     (each at least ``n_times`` long, overwritten), allocating nothing: the same code serves a
     GPU thread (:mod:`skidmc.solver.device`), whose local memory NumPy cannot allocate.
     """
-    omega, _, t_exit, exit_code, s, c = impact_constants(mu, flow_stress, billet_mass,
+    pressure = contact_pressure(flow_stress, target_hardness)
+    omega, _, t_exit, exit_code, s, c = impact_constants(mu, pressure, billet_mass,
                                                       billet_diameter, angle, tilt)
     if not (mu > 0.0) or not (prefactor > 0.0):
         return h_max, CENSOR_ABOVE, t_exit, exit_code, False
@@ -414,7 +426,7 @@ def fast_height_core(mu, flow_stress, billet_mass, billet_diameter, angle, tilt,
     share = e1 / (e1 + e2)
     for k in range(n_times):
         times[k] = t_exit * (k + 1.0) / n_times
-    duhamel_theta(mu * flow_stress * math.sqrt(2.0 * STANDARD_GRAVITY), s, c, omega, t_exit,
+    duhamel_theta(mu * pressure * math.sqrt(2.0 * STANDARD_GRAVITY), s, c, omega, t_exit,
                   e1 + e2,
                   times, gl_x, gl_w, theta)
     th_max = 0.0
@@ -492,7 +504,8 @@ def fast_heights_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, ti
                         initial_temperature, he_density, he_heat_capacity, he_conductivity,
                         he_heat_of_fusion, he_melting_point, prefactor, activation_temperature,
                         heat_of_reaction, target_density, target_heat_capacity,
-                        target_conductivity, h_min, h_max, c_ign, melt_factor, stops_factor,
+                        target_conductivity, target_hardness, h_min, h_max, c_ign, melt_factor,
+                       stops_factor,
                         table, gl_x, gl_w, n_times, out_height, out_censor, out_exit_time,
                         out_exit_code):
     """Batched :func:`fast_height_kernel` over arrays of equal length (one core, serial).
@@ -506,7 +519,8 @@ def fast_heights_kernel(mu, flow_stress, billet_mass, billet_diameter, angle, ti
             initial_temperature[i], he_density[i], he_heat_capacity[i], he_conductivity[i],
             he_heat_of_fusion[i], he_melting_point[i], prefactor[i], activation_temperature[i],
             heat_of_reaction[i], target_density[i], target_heat_capacity[i],
-            target_conductivity[i], h_min, h_max, c_ign, melt_factor, stops_factor, table, gl_x,
+            target_conductivity[i], target_hardness[i], h_min, h_max, c_ign, melt_factor,
+            stops_factor, table, gl_x,
             gl_w, n_times)
         out_height[i] = h
         out_censor[i] = cens

@@ -36,6 +36,7 @@ __all__ = [
     "STANDARD_GRAVITY",
     "angular_frequency",
     "contact_area",
+    "contact_pressure",
     "contact_time",
     "exit_from_constants",
     "exit_time",
@@ -67,6 +68,34 @@ CG_OFFSET_FACTOR = 0.375
 #: Exit codes of :func:`exit_from_constants` and their names.
 EXIT_REBOUND, EXIT_STOPS_SLIDING = 0, 1
 EXIT_KINDS = ("rebound", "stops_sliding")
+
+
+@njit(cache=True)
+def contact_pressure(flow_stress, target_hardness):
+    """Normal pressure over the contact, p = min(sigma, p_t) [Pa] (docs/model.md, "Targets
+    softer than the billet").
+
+    The report's contact (Sec. II.B) is a plastic impact at the billet's flow stress sigma on a
+    rigid target. Whichever of billet and target yields at the lower pressure limits it: a
+    target whose indentation hardness (or confined crushing strength) p_t lies below sigma is
+    indented by the billet, which stays elastic (nearly rigid), and the contact pressure is p_t.
+    The cap law a^2 = D X of a sphere in a plastic half-space (pile-up and sink-in neglected)
+    and the rigid-body kinematics of Eqs. (2)-(10) are the same with p in place of sigma, so
+    every equation of :mod:`skidmc.physics.mechanics` and the flux q = mu p V_r (Eq. 1) take p.
+
+    Parameters
+    ----------
+    flow_stress : float
+        sigma, the billet's plastic flow stress [Pa].
+    target_hardness : float
+        p_t, the target's yield pressure [Pa]; inf for a rigid target.
+
+    Returns
+    -------
+    float
+        [Pa].
+    """
+    return min(flow_stress, target_hardness)
 
 
 def impact_speed(height):

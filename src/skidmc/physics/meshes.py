@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
-__all__ = ["fill_meshes", "geometric_ratio", "reaction_zone"]
+__all__ = ["fill_meshes", "geometric_ratio", "layered_target_cells", "reaction_zone"]
 
 
 @njit(cache=True)
@@ -122,3 +123,72 @@ def fill_meshes(he_density, he_heat_capacity, he_conductivity, target_density,
     g_tg = 1.0 / (width[n_cells - 1] / (2.0 * target_conductivity))
     g_he = 1.0 / (width[n_cells] / (2.0 * he_conductivity))
     return g_he / (g_tg + g_he)
+
+
+def layered_target_cells(rho_c, conductivity, thickness, first_width, t_end, n_cells,
+                         depth_diffusion_lengths):
+    """Cells of a layered target with a cell face on every interface (docs/targets.md).
+
+    The mesh is the homogeneous target's geometric mesh laid out in the *diffusion depth*
+    zeta = sum of (depth within layer j) / sqrt(alpha_j t_end) instead of in metres: each layer
+    gets cells in proportion to how far heat diffuses into it, the mesh ends
+    ``depth_diffusion_lengths`` diffusion depths down (the homogeneous rule, layer by layer),
+    and for a stack of one material it is the homogeneous mesh. Each interface above that depth
+    takes the nearest face of the geometric mesh (no two interfaces the same face), so every
+    cell lies in one layer.
+
+    Parameters
+    ----------
+    rho_c, conductivity : sequence of float
+        Volumetric heat capacity [J/(m^3 K)] and conductivity [W/(m K)] of each layer, from the
+        surface down.
+    thickness : sequence of float
+        Each layer's thickness [m]; the last is ignored (semi-infinite).
+    first_width : float
+        Width of the first cell [m] (in the top layer; as the homogeneous target's).
+    t_end : float
+        End of the integration [s].
+    n_cells : int
+        Number of cells.
+    depth_diffusion_lengths : float
+        Mesh depth in diffusion depths [1].
+
+    Returns
+    -------
+    width, cell_rho_c, cell_conductivity : ndarray
+        Per cell, from the surface down [m], [J/(m^3 K)], [W/(m K)].
+
+    Raises
+    ------
+    ValueError
+        More interfaces inside the mesh than it has inner faces.
+    """
+    rho_c = np.asarray(rho_c, dtype=float)
+    k = np.asarray(conductivity, dtype=float)
+    lengths = np.sqrt(k / rho_c * t_end)          # diffusion length of each layer [m]
+    n_layers = len(rho_c)
+    zeta_total = float(depth_diffusion_lengths)
+    # diffusion depths of the interfaces
+    bounds = np.cumsum([thickness[j] / lengths[j] for j in range(n_layers - 1)])
+    h0 = first_width / lengths[0]
+    r = geometric_ratio(h0, zeta_total, n_cells)
+    if r == 1.0:  # uniform cells reach deeper than asked (as fill_meshes has it)
+        faces = h0 * np.arange(n_cells + 1, dtype=float)
+    else:
+        faces = h0 * (r ** np.arange(n_cells + 1, dtype=float) - 1.0) / (r - 1.0)
+        faces[-1] = zeta_total
+    inner = bounds[bounds < faces[-1]]
+    last = 0
+    for z in inner:
+        candidates = np.arange(last + 1, n_cells)
+        if candidates.size == 0:
+            raise ValueError(f"{inner.size} layer interfaces inside the heated depth need more "
+                             f"than {n_cells} cells")
+        j = int(candidates[np.argmin(np.abs(faces[candidates] - z))])
+        faces[j] = z
+        last = j
+    # each cell's layer: the one holding its midpoint in zeta
+    mid = 0.5 * (faces[:-1] + faces[1:])
+    layer = np.searchsorted(bounds, mid, side="right")
+    width = np.diff(faces) * lengths[layer]
+    return width, rho_c[layer], k[layer]

@@ -29,8 +29,12 @@ __all__ = [
     "BETWEEN_KEYS",
     "CONFIGURATIONS",
     "DESCRIPTIONS",
+    "DEFAULT_TARGET_HARDNESS",
     "FIELDS",
+    "HARDNESS_WORDS",
+    "INFINITE_OK",
     "INPUT_KEYS",
+    "LAYERS_KEY",
     "NUMERIC_KEYS",
     "PARTNERS",
     "SCENE_KEYS",
@@ -213,7 +217,33 @@ INPUT_KEYS: tuple[InputKey, ...] = (
         "target.conductivity", "W/(m K)", _POSITIVE, (1e-2, 5e3),
         "target thermal conductivity k_2", "k_2", "Eqs. (12), (15); Tables II, VI",
         "cal/s/cm/K"),
+    InputKey(
+        "target.hardness", "Pa", Interval(0.0, True, _INF, True), (1e5, 1e12),
+        "contact pressure at which the target yields p_t (indentation hardness or confined "
+        "crushing strength; \"rigid\" = inf, the report's rigid target; \"elastic\" = 0, a "
+        "target the plastic-contact model cannot describe)", "p_t",
+        "replaces sigma in omega (Sec. II.B) and Eqs. (1), (5) where p_t < sigma "
+        "(docs/model.md, \"Targets softer than the billet\")", "MPa",
+        " (\"rigid\" for inf, \"elastic\" for 0)"),
 )
+
+#: The scene attribute (not an input key: no unit, not sampled, not stored as a column) that
+#: holds a layered target's deeper layers, set with a stack (``target = "gold 3 mil / copper 7
+#: mil / aluminium-2024"``) or directly as canonical SI text: the top layer's thickness [m], then
+#: density [kg/m^3], heat capacity [J/(kg K)], conductivity [W/(m K)] and thickness [m] of each
+#: deeper layer, the last without a thickness (semi-infinite), separated by '|'; empty for a
+#: homogeneous target (docs/targets.md). The top layer's properties are the target.* keys.
+LAYERS_KEY = "target.layers"
+
+#: Keys that may hold +inf (every other numeric key must be finite).
+INFINITE_OK: frozenset[str] = frozenset({"target.hardness"})
+
+#: Words a key of :data:`INFINITE_OK` takes for its ends: ``"rigid"`` -> inf, ``"elastic"`` -> 0.
+HARDNESS_WORDS: dict[str, float] = {"rigid": _INF, "elastic": 0.0}
+
+#: Default of ``target.hardness`` when a scene (a preset) does not give it: the report's rigid
+#: target.
+DEFAULT_TARGET_HARDNESS = _INF
 
 _BY_KEY: dict[str, InputKey] = {k.key: k for k in INPUT_KEYS}
 

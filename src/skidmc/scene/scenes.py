@@ -29,9 +29,12 @@ from skidmc.errors import MissingKeyError, SceneError, UnknownKeyError
 from skidmc.scene.keys import (
     BETWEEN_KEYS,
     CONFIGURATIONS,
+    DEFAULT_TARGET_HARDNESS,
     DESCRIPTIONS,
     FIELDS,
+    INFINITE_OK,
     INPUT_KEYS,
+    LAYERS_KEY,
     NUMERIC_KEYS,
     PARTNERS,
     SCENE_KEYS,
@@ -42,7 +45,7 @@ from skidmc.scene.keys import (
     implausible_reason,
     in_bounds,
 )
-from skidmc.scene.materials import MATERIAL_KEY, get_material
+from skidmc.scene.materials import MATERIAL_KEY, format_layers, parse_layers, target_values
 from skidmc.scene.presets import PRESETS
 from skidmc.scene.units import read_si
 
@@ -62,9 +65,11 @@ __all__ = [
 # Attribute name of each key (dots -> underscores) and back; attribute names are also accepted as
 # keys in overrides, so that ``scene.replace(he_density=1900.0)`` works.
 _FIELD_OF_KEY: dict[str, str] = FIELDS
+_LAYERS_FIELD = LAYERS_KEY.replace(".", "_")
 _KEY_OF_NAME: dict[str, str] = {
     **{field: key for key, field in _FIELD_OF_KEY.items()},
     **{key: key for key in SCENE_KEYS},
+    _LAYERS_FIELD: LAYERS_KEY, LAYERS_KEY: LAYERS_KEY,
 }
 _NUMERIC = frozenset(NUMERIC_KEYS)
 _ATTRIBUTES_MARK = "<attributes from skidmc.scene.keys.INPUT_KEYS>"
@@ -75,13 +80,23 @@ def _fields_from_input_keys(cls: type) -> type:
     float or str) and the docstring's Attributes section, before :func:`dataclasses.dataclass`
     makes it a dataclass: the table is the one definition of the fields."""
     cls.__annotations__ = {k.field: k.type_name for k in INPUT_KEYS}
+    # The last key, the target's hardness, defaults to the report's rigid target, so that a
+    # scene written without it (Scene(...) by hand) means what it did.
+    assert INPUT_KEYS[-1].key == "target.hardness"
+    cls.target_hardness = DEFAULT_TARGET_HARDNESS
+    # Not an input key: a layered target's deeper layers (skidmc.scene.keys.LAYERS_KEY).
+    cls.__annotations__[_LAYERS_FIELD] = "str"
+    cls.target_layers = ""  # a homogeneous target
     lines = []
     for k in INPUT_KEYS:
         unit = f" [{k.si_unit}]" if k.numeric else ""
         text = k.description[0].upper() + k.description[1:]
-        if not k.numeric:
+        if k.key == "configuration":
             text += ": " + " or ".join(f"``{c!r}``" for c in CONFIGURATIONS)
         lines += [f"    {k.field} : {k.type_name}", f"        {text}{unit}."]
+    lines += [f"    {_LAYERS_FIELD} : str",
+              "        A layered target's layers beneath the top (canonical SI text, "
+              "skidmc.scene.keys.LAYERS_KEY); empty for a homogeneous target."]
     if cls.__doc__:  # None under python -OO
         cls.__doc__ = cls.__doc__.replace("    " + _ATTRIBUTES_MARK, "\n".join(lines))
     return cls
@@ -119,11 +134,16 @@ class Scene:
                     "unit strings",
                 )
             x = float(value)
-            if not math.isfinite(x):
+            if not (math.isfinite(x) or (key in INFINITE_OK and x == math.inf)):
                 raise SceneError(key, value, "must be finite")
             if not in_bounds(key, x):
                 raise SceneError(key, value, bound_reason(key))
             object.__setattr__(self, field, x)
+        if not isinstance(self.target_layers, str):
+            raise SceneError(LAYERS_KEY, self.target_layers, "expected a string (empty for "
+                             "a homogeneous target)")
+        if self.target_layers:
+            parse_layers(self.target_layers)
         if self.configuration not in CONFIGURATIONS:
             raise SceneError(
                 "configuration", self.configuration,
@@ -194,7 +214,7 @@ def _base_values(preset: str | Scene | None) -> dict:
     if preset is None:
         return {}
     if isinstance(preset, Scene):
-        return preset.as_dict()
+        return {**preset.as_dict(), LAYERS_KEY: preset.target_layers}
     if isinstance(preset, str):
         return get_preset(preset).as_dict()
     raise SceneError("preset", preset, "expected a preset name or a Scene")
@@ -206,6 +226,11 @@ def _convert(key: str, value: object) -> tuple[float | str, bool]:
         if not isinstance(value, str):
             raise SceneError(key, value, "must be one of " + ", ".join(map(repr, CONFIGURATIONS)))
         return value.strip().lower(), False
+    if key == LAYERS_KEY:
+        if not isinstance(value, str):
+            raise SceneError(key, value, "expected a string (set it with a stack: target = "
+                             "\"gold 3 mil / copper 7 mil / aluminium-2024\")")
+        return (format_layers(*parse_layers(value)) if value.strip() else ""), False
     return read_si(key, value, SI_UNITS[key])
 
 
@@ -273,11 +298,11 @@ def make_scene(
     given.update(_flatten(overrides))  # keyword overrides win over the mapping
     values = dict(base)
     if MATERIAL_KEY in given:  # before the keys given: an explicit target.* key wins
-        for key, text in get_material(given.pop(MATERIAL_KEY)).values.items():
+        for key, text in target_values(given.pop(MATERIAL_KEY)).items():
             values[key] = _convert(key, text)[0]
     bare = []
     for key, raw in given.items():
-        if key not in SI_UNITS:
+        if key not in SI_UNITS and key != LAYERS_KEY:
             raise UnknownKeyError(key, raw, [*SCENE_KEYS, MATERIAL_KEY])
         values[key], is_bare = _convert(key, raw)
         if is_bare:
@@ -289,6 +314,10 @@ def make_scene(
         elif values["configuration"] == "pendulum" and base.get("configuration") != "pendulum":
             values["tilt"] = 0.0
 
+    # A scene that does not name the target's hardness (the report's presets) has the report's
+    # rigid target.
+    values.setdefault("target.hardness", DEFAULT_TARGET_HARDNESS)
+    values.setdefault(LAYERS_KEY, "")
     missing = [key for key in SCENE_KEYS if key not in values]
     if missing:
         raise MissingKeyError(
@@ -296,7 +325,8 @@ def make_scene(
             "missing; no value for " + ", ".join(missing) + "; give them or start from a preset",
         )
     try:
-        scene = Scene(**{_FIELD_OF_KEY[key]: values[key] for key in SCENE_KEYS})
+        scene = Scene(**{_FIELD_OF_KEY[key]: values[key] for key in SCENE_KEYS},
+                      target_layers=values[LAYERS_KEY])
     except SceneError as err:
         # Name the value as the user wrote it (not its SI conversion), and for a check between two
         # keys name the one the user gave.

@@ -24,6 +24,7 @@ import re
 import pint
 
 from skidmc.errors import SceneError, UnitError
+from skidmc.scene.keys import HARDNESS_WORDS, INFINITE_OK
 
 __all__ = ["from_si", "read_si", "to_si", "ureg"]
 
@@ -149,6 +150,8 @@ def read_si(key: str, value: object, expected_unit: str) -> tuple[float, bool]:
         # Before any pint call: a plain number needs no units (ensembles build scenes from
         # floats, and parsing the unit cost ~1 ms per scene).
         return float(value), True
+    if key in INFINITE_OK and isinstance(value, str) and value.strip().lower() in HARDNESS_WORDS:
+        return HARDNESS_WORDS[value.strip().lower()], False  # "rigid" -> inf, "elastic" -> 0
     expected = ureg.parse_units(expected_unit)
     bare = False
     if isinstance(value, pint.Quantity):

@@ -156,7 +156,7 @@ def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", 
 
     Parameters
     ----------
-    rows : ndarray, shape (n, 18)
+    rows : ndarray, shape (n, 19)
         Scenes as rows of SI floats in the order of :data:`skidmc.solver.fast.SCENE_FIELDS`
         (already validated: :class:`skidmc.scene.Scene` ranges).
     rtol : float
@@ -191,8 +191,8 @@ def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", 
     if not (0.0 < h_min < h_max):
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
     rows = np.ascontiguousarray(rows, dtype=np.float64)
-    if rows.ndim != 2 or rows.shape[1] != 18:
-        raise ValueError(f"rows must have shape (n, 18), got {rows.shape}")
+    if rows.ndim != 2 or rows.shape[1] != 19:
+        raise ValueError(f"rows must have shape (n, 19), got {rows.shape}")
     runaway = DEFAULT_RUNAWAY_FRACTION if runaway_fraction is None else float(runaway_fraction)
     level, width, spread, x_tol = _plan(float(rtol))
     args = (float(rtol), float(h_min), float(h_max), float(level), float(width), float(spread),
@@ -278,7 +278,11 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     censor_names = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
     results = []
     for scene, o in zip(scenes, out):
-        if o[device.OUT_STATUS] != device.STATUS_OK:
+        # The device's target is homogeneous: a stack whose heat reaches below its top layer
+        # goes to the fallback (the CPU search meshes its layers).
+        layered = bool(scene.target_layers) and "layered_target" in build_model(
+            scene, meshes=False, melting=melting, **extra).terms
+        if layered or o[device.OUT_STATUS] != device.STATUS_OK:
             try:
                 results.append(fallback(scene, rtol=rtol, h_min=h_min, h_max=h_max,
                                         melting=melting, **extra))

@@ -47,7 +47,7 @@ from skidmc.physics.fast import (
     STOPS_SLIDING_FACTOR,
     fast_height_core,
 )
-from skidmc.physics.mechanics import STANDARD_GRAVITY, impact_constants
+from skidmc.physics.mechanics import STANDARD_GRAVITY, contact_pressure, impact_constants
 from skidmc.physics.meshes import fill_meshes
 from skidmc.physics.thermal import (
     INFO_EVENT,
@@ -124,7 +124,7 @@ OUT_SIZE = 10
 
 # Columns of an input row: skidmc.solver.fast.SCENE_FIELDS (NUMERIC_KEYS order), SI units.
 (_MU, _SIGMA, _MASS, _DIAMETER, _ANGLE, _TILT, _T0, _HE_RHO, _HE_C, _HE_K, _HE_L, _HE_TM, _Z,
- _TA, _Q, _TG_RHO, _TG_C, _TG_K) = range(18)
+ _TA, _Q, _TG_RHO, _TG_C, _TG_K, _TG_P) = range(19)
 
 # Scalars shared by every level of one scene (the `sc` array).
 (_S_OMEGA, _S_T_EXIT, _S_SLIDE_S, _S_SLIDE_C, _S_EXTENSION, _S_T_END, _S_FLUX,
@@ -334,7 +334,7 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
 
     Parameters
     ----------
-    row : ndarray, shape (18,)
+    row : ndarray, shape (19,)
         The scene's inputs in the order of :data:`skidmc.solver.fast.SCENE_FIELDS` [SI].
     rtol : float
         Relative tolerance on the critical height [1].
@@ -364,8 +364,13 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
     for k in range(OUT_SIZE):
         out[k] = 0.0
     mu = row[_MU]
+    if not row[_TG_P] > 0.0:
+        # An elastic target: the CPU path refuses it with the reason (model.elastic_target_reason).
+        out[OUT_STATUS] = STATUS_CPU
+        return
+    pressure = contact_pressure(row[_SIGMA], row[_TG_P])
     omega, _, t_exit, exit_code, slide_s, slide_c = impact_constants(
-        mu, row[_SIGMA], row[_MASS], row[_DIAMETER], row[_ANGLE], row[_TILT])
+        mu, pressure, row[_MASS], row[_DIAMETER], row[_ANGLE], row[_TILT])
     out[OUT_EXIT_CODE] = exit_code
     out[OUT_EXIT_TIME] = t_exit
     out[OUT_LEVEL] = level
@@ -394,7 +399,7 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
     h_fast, censor_fast, _, _, _ = fast_height_core(
         mu, row[_SIGMA], row[_MASS], row[_DIAMETER], row[_ANGLE], row[_TILT], row[_T0],
         row[_HE_RHO], row[_HE_C], row[_HE_K], latent, row[_HE_TM], row[_Z], row[_TA], row[_Q],
-        row[_TG_RHO], row[_TG_C], row[_TG_K], h_min, h_max, C_IGNITION, MELT_FACTOR,
+        row[_TG_RHO], row[_TG_C], row[_TG_K], row[_TG_P], h_min, h_max, C_IGNITION, MELT_FACTOR,
         STOPS_SLIDING_FACTOR, table,
         gl_x, gl_w, N_TIMES, fast_work[0], fast_work[1], fast_work[2])
     if censor_fast == CENSOR_NONE and h_fast > 0.0:
@@ -404,7 +409,7 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
 
     sc[_S_OMEGA], sc[_S_T_EXIT], sc[_S_SLIDE_S], sc[_S_SLIDE_C] = omega, t_exit, slide_s, slide_c
     sc[_S_EXTENSION], sc[_S_T_END] = extension, HORIZON_EXIT_TIMES * t_exit
-    sc[_S_FLUX] = mu * row[_SIGMA] * math.sqrt(2.0 * STANDARD_GRAVITY)
+    sc[_S_FLUX] = mu * pressure * math.sqrt(2.0 * STANDARD_GRAVITY)
     sc[_S_LATENT], sc[_S_RUNAWAY], sc[_S_SPREAD] = latent, runaway_fraction, melt_spread
 
     coarse_level, fine_level = level - 1.0, level
@@ -508,7 +513,7 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
 @njit(cache=True, parallel=True)
 def critical_heights_cpu(rows, rtol, h_min, h_max, level, melt_width, melt_spread, x_tol,
                          melting, runaway_fraction, table, gl_x, gl_w, out):
-    """:func:`critical_height_core` for every row of ``rows`` (shape (n, 18)) on the CPU's
+    """:func:`critical_height_core` for every row of ``rows`` (shape (n, 19)) on the CPU's
     threads, each with its own NumPy scratch; results in ``out`` (shape (n, OUT_SIZE))."""
     for i in prange(rows.shape[0]):
         work = np.empty((WORK_ROWS, MAX_CELLS))

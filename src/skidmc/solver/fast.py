@@ -38,9 +38,17 @@ from skidmc.physics.mechanics import (
     EXIT_REBOUND,
     EXIT_STOPS_SLIDING,
     STANDARD_GRAVITY,
+    contact_pressure,
     impact_constants,
 )
-from skidmc.scene.keys import FIELDS, NUMERIC_KEYS, bound_reason, in_bounds
+from skidmc.scene.keys import (
+    DEFAULT_TARGET_HARDNESS,
+    FIELDS,
+    INFINITE_OK,
+    NUMERIC_KEYS,
+    bound_reason,
+    in_bounds,
+)
 from skidmc.solver.model import SELF_HEATING_TIME, build_model
 from skidmc.solver.results import HeightResult
 
@@ -88,14 +96,15 @@ def theta_history(scene, n_times=N_TIMES):
     theta : ndarray
         Theta(t) [K/m^0.5]: T_s - T0 = sqrt(H) Theta(t) for an inert HE.
     """
-    omega, _, t_exit, _, s, c = impact_constants(scene.mu, scene.flow_stress, scene.billet_mass,
+    pressure = contact_pressure(scene.flow_stress, scene.target_hardness)
+    omega, _, t_exit, _, s, c = impact_constants(scene.mu, pressure, scene.billet_mass,
                                               scene.billet_diameter, scene.angle, scene.tilt)
     e1 = math.sqrt(scene.he_conductivity * scene.he_density * scene.he_heat_capacity)
     e2 = math.sqrt(scene.target_conductivity * scene.target_density
                    * scene.target_heat_capacity)
     times = t_exit * np.arange(1, n_times + 1) / n_times
     theta = np.empty(n_times)
-    flux_per_root_height = scene.mu * scene.flow_stress * math.sqrt(2.0 * STANDARD_GRAVITY)
+    flux_per_root_height = scene.mu * pressure * math.sqrt(2.0 * STANDARD_GRAVITY)
     duhamel_theta(flux_per_root_height, s, c, omega, t_exit, e1 + e2, times, _GL_X01, _GL_W01,
                   theta)
     return times, theta
@@ -165,6 +174,9 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
     # Terms and validity flags (scene and height) as the full tier infers them, without meshes.
     model = build_model(scene, melting=melting, meshes=False)
+    if "layered_target" in model.terms:
+        raise SceneError("tier", "fast", "the fast tier's target is homogeneous, and this "
+                         "stack's heat reaches below its top layer (use the full tier)")
     error = fast_error_bound(model.flags)
     refused = [f for f in REFUSED_FLAGS if f in model.flags]
     if strict and refused:
@@ -217,6 +229,8 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
         ``error_estimate`` [1] (:func:`fast_error_bound`; heights within it of a bound are
         censored there, as :func:`fast_critical_height` does).
     """
+    # A batch that does not give the target's hardness has the report's rigid target.
+    columns.setdefault("target_hardness", DEFAULT_TARGET_HARDNESS)
     missing = [f for f in SCENE_FIELDS if f not in columns]
     if missing:
         raise TypeError(f"missing columns: {missing}")
@@ -225,6 +239,12 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
     arrays = np.broadcast_arrays(*[np.asarray(columns[f], dtype=float) for f in SCENE_FIELDS])
     arrays = [np.array(np.atleast_1d(a), dtype=float) for a in arrays]  # own, writable copies
     _check_columns(arrays)
+    hardness = arrays[SCENE_FIELDS.index("target_hardness")]
+    if (hardness == 0.0).any():
+        row = int(np.argmax(hardness == 0.0))
+        raise SceneError("target.hardness", 0.0, "an elastic target (rubber) cannot be "
+                         "described by the report's plastic-contact model (docs/model.md, "
+                         f"targets softer than the billet) (row {row})")
     if not melting:
         arrays[10] = np.zeros_like(arrays[10])
     n = arrays[0].shape[0]
@@ -273,7 +293,8 @@ def _check_columns(arrays):
     """
     for field, values in zip(SCENE_FIELDS, arrays):
         key = _KEY_OF_FIELD[field]
-        bad = ~(np.isfinite(values) & in_bounds(key, values))
+        finite = np.isfinite(values) | ((values == np.inf) if key in INFINITE_OK else False)
+        bad = ~(finite & in_bounds(key, values))
         if bad.any():
             row = int(np.argmax(bad))
             raise SceneError(key, float(values[row]), f"{bound_reason(key)} (row {row})")

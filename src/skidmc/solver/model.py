@@ -27,8 +27,14 @@ from numba import njit
 
 from skidmc.errors import SceneError
 from skidmc.physics import mechanics
-from skidmc.physics.meshes import fill_meshes, geometric_ratio, reaction_zone
+from skidmc.physics.meshes import (
+    fill_meshes,
+    geometric_ratio,
+    layered_target_cells,
+    reaction_zone,
+)
 from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION, runaway_temperature
+from skidmc.scene.materials import parse_layers
 
 __all__ = [
     "BASE_RESOLUTION",
@@ -44,6 +50,7 @@ __all__ = [
     "SELF_HEATING_TIME",
     "SkidModel",
     "build_model",
+    "elastic_target_reason",
     "estimated_reaction_zone",
     "flux_extension",
     "ignition_temperature",
@@ -52,6 +59,7 @@ __all__ = [
     "level_resolution",
     "melt_width_floor",
     "resolution_for_level",
+    "target_layers",
 ]
 
 #: Integration horizon, in exit times. Beyond the exit the flux is extended (see
@@ -123,7 +131,34 @@ FLAG_MEANINGS: dict[str, str] = {
     "long_slide": f"the contact slides over more than {LONG_SLIDE_DIAMETERS:g} contact "
                   "diameter(s) while heating: fresh cold target is ignored, so the real height "
                   "is higher (the model is conservative)",
+    "layered_target": "the heat reaches below the target's top layer: the layers are meshed "
+                      "(docs/targets.md)",
+    "top_layer_only": "a layered target whose top layer is thicker than the heat reaches: "
+                      "the homogeneous top layer is used (docs/targets.md)",
+    "yielding_target": "the target yields below the billet's flow stress: the contact "
+                       "pressure is the target's hardness (longer, gentler contact, less "
+                       "frictional heat; docs/model.md, targets softer than the billet)",
 }
+
+
+def elastic_target_reason(scene):
+    """Why the solver refuses a scene's target, or None: an elastic target
+    (``target.hardness`` = 0, ``"elastic"``, the registry's rubber).
+
+    The report's impact is plastic at a constant contact pressure (Sec. II.B) and its heat is
+    friction at that pressure (Eq. 1). An elastomer does not flow: its contact pressure grows
+    with its compression (Hertz, then the mat's thickness bottoming out on the floor beneath),
+    the billet rebounds elastically, and the heat comes partly from the rubber's hysteresis.
+    None of Eqs. (2)-(10) describes that, so no height is given rather than a number the model
+    cannot support.
+    """
+    if scene.target_hardness > 0.0:
+        return None
+    return ("an elastic target (rubber) cannot be described by the report's plastic-contact "
+            "model (constant contact pressure, Sec. II.B; heat mu p V_r, Eq. 1): its pressure "
+            "grows with compression until a mat bottoms out on the floor beneath, and the "
+            "billet rebounds elastically; give the floor beneath (e.g. target = \"concrete\") "
+            "or a yield pressure (target.hardness) to bound it")
 
 
 @dataclass(frozen=True)
@@ -354,7 +389,12 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         raise SceneError("target", target, 'must be "mesh" or "exact"')
     if resolution is None:
         resolution = resolution_for_level(level, melt_width, melt_spread)
-    sigma = scene.flow_stress
+    reason = elastic_target_reason(scene)
+    if reason is not None:
+        raise SceneError("target.hardness", scene.target_hardness, reason)
+    # The contact pressure: the billet's flow stress on a rigid target, the target's hardness
+    # where it yields first (docs/model.md, "Targets softer than the billet").
+    sigma = mechanics.contact_pressure(scene.flow_stress, scene.target_hardness)
     mass = scene.billet_mass
     diameter = scene.billet_diameter
     mu = scene.mu
@@ -369,6 +409,8 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     flags = []
     if scene.tilt > 0.0:
         terms.append("normal_force_spin")
+    if sigma < scene.flow_stress:
+        flags.append("yielding_target")
     if exit_kind == "stops_sliding":
         flags.append("stops_sliding")
         if t_exit < EARLY_STOP_FRACTION * t_c:
@@ -401,10 +443,31 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
     else:
         latent = 0.0
 
+    layers = target_layers(scene)
+    if layers is not None:
+        # Layers only where heat reaches below the top layer within the simulated time: a top
+        # deeper than the homogeneous target's mesh (DEPTH_DIFFUSION_LENGTHS sqrt(alpha t_end))
+        # leaves the meshed model unchanged, and the exact target's far field changes the
+        # height by less than measured in docs/targets.md.
+        top_alpha = layers[1][0] / layers[0][0]
+        if layers[2][0] >= DEPTH_DIFFUSION_LENGTHS * math.sqrt(top_alpha * t_end):
+            terms.append("top_layer_only")
+            flags.append("top_layer_only")
+            layers = None
+        else:
+            terms.append("layered_target")
+            flags.append("layered_target")
+            if target == "exact":
+                raise SceneError("target", target, "the heat reaches below the target's top "
+                                 "layer: a layered target needs the meshed target "
+                                 "(target='mesh'; the default search chooses it)")
+
     if meshes:
         n_cells = resolution.cells_per_medium
         width, rho_c, face, q_share_he = _meshes(scene, resolution, t_exit, t_end, prefactor,
                                                  t_a)
+        if layers is not None:
+            q_share_he = _layer_meshes(scene, layers, t_end, n_cells, width, rho_c, face)
     else:
         # No cells: the fields as the mesh arithmetic would leave them, without running it
         # (the fast tier builds a mesh-less model for every result).
@@ -462,6 +525,44 @@ def _meshes(scene, resolution, t_exit, t_end, prefactor, activation_temperature)
                         resolution.first_cell_fraction, DEPTH_DIFFUSION_LENGTHS,
                         width, rho_c, face)
     return width, rho_c, face, float(share)
+
+
+def target_layers(scene):
+    """The scene's target as layers, or None for a homogeneous one.
+
+    Returns
+    -------
+    (rho_c, conductivity, thickness) : tuple of tuple of float, or None
+        Per layer from the surface down: volumetric heat capacity [J/(m^3 K)], conductivity
+        [W/(m K)], thickness [m] (inf for the last); the first layer is the scene's target.*
+        keys, the deeper ones ``target.layers``.
+    """
+    text = getattr(scene, "target_layers", "")
+    if not text:
+        return None
+    top, deeper = parse_layers(text)
+    rho_c = (scene.target_density * scene.target_heat_capacity,
+             *(rho * c for rho, c, _, _ in deeper))
+    k = (scene.target_conductivity, *(row[2] for row in deeper))
+    thickness = (top, *(row[3] for row in deeper))
+    return rho_c, k, thickness
+
+
+def _layer_meshes(scene, layers, t_end, n_cells, width, rho_c, face):
+    """Replace the target's cells of the homogeneous meshes (``width``, ``rho_c``, ``face``,
+    target far end first) by a layered target's
+    (:func:`skidmc.physics.meshes.layered_target_cells`), with the same first cell; returns
+    the share of the interface flux into the HE [1]."""
+    cells_w, cells_rc, cells_k = layered_target_cells(
+        layers[0], layers[1], layers[2], width[n_cells - 1], t_end, n_cells,
+        DEPTH_DIFFUSION_LENGTHS)
+    width[:n_cells] = cells_w[::-1]
+    rho_c[:n_cells] = cells_rc[::-1]
+    k = np.concatenate([cells_k[::-1], np.full(n_cells, scene.he_conductivity)])
+    half = width / (2.0 * k)
+    face[:n_cells] = 1.0 / (half[:n_cells] + half[1:n_cells + 1])
+    g_tg, g_he = 1.0 / half[n_cells - 1], 1.0 / half[n_cells]
+    return float(g_he / (g_tg + g_he))
 
 
 def _ignition_diagnostics(prefactor, activation_temperature, adiabatic_rise,

@@ -22,9 +22,14 @@ import math
 import time
 
 from skidmc.errors import SceneError
-from skidmc.physics.mechanics import EXIT_STOPS_SLIDING, impact_constants, sliding_velocity
+from skidmc.physics.mechanics import (
+    EXIT_STOPS_SLIDING,
+    contact_pressure,
+    impact_constants,
+    sliding_velocity,
+)
 from skidmc.physics.thermal import MELT_SPREAD
-from skidmc.solver.model import build_model, melt_width_floor
+from skidmc.solver.model import build_model, elastic_target_reason, melt_width_floor
 from skidmc.solver.plan import (
     EXACT_FINE_SHIFT,
     EXACT_FINE_SHIFT_SPREAD,
@@ -202,6 +207,9 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
         raise SceneError("tier", tier, f"unknown tier (expected one of {', '.join(TIERS)})")
     if not (0.0 < h_min < h_max):
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
+    refused = elastic_target_reason(scene)
+    if refused is not None:
+        raise SceneError("target.hardness", scene.target_hardness, refused)
     if tier == "fast":
         from skidmc.solver.fast import fast_critical_height
 
@@ -225,7 +233,10 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     if melt_spread is None:
         melt_spread = MELT_SPREAD if adaptive else 0.0
     if target is None:
-        target = "exact" if adaptive else "mesh"
+        # The exact target is homogeneous: a stack whose heat reaches below its top layer is
+        # meshed (docs/targets.md).
+        layered = "layered_target" in build_model(scene, meshes=False).terms
+        target = "exact" if adaptive and not layered else "mesh"
     elif target not in TARGETS:
         raise SceneError("target", target, f"expected one of {', '.join(TARGETS)}")
     signs = adaptive and _margin_likely_jumps(scene)
@@ -411,13 +422,13 @@ def _exit_regime(scene):
     """How the scene's heating ends: "stops_sliding" (before rebound), "fading" (a rebound with
     the sliding speed at rebound, report Eq. 10, below :data:`FADING_EXIT_SPEED` of the initial
     one) or "steady" (the other rebounds)."""
+    pressure = contact_pressure(scene.flow_stress, scene.target_hardness)
     _, _, t_exit, exit_code, _, _ = impact_constants(
-        scene.mu, scene.flow_stress, scene.billet_mass, scene.billet_diameter, scene.angle,
-        scene.tilt)
+        scene.mu, pressure, scene.billet_mass, scene.billet_diameter, scene.angle, scene.tilt)
     if exit_code == EXIT_STOPS_SLIDING:
         return "stops_sliding"
     speed_at = functools.partial(sliding_velocity, height=1.0, mu=scene.mu, angle=scene.angle,
-                                 tilt=scene.tilt, flow_stress=scene.flow_stress,
+                                 tilt=scene.tilt, flow_stress=pressure,
                                  billet_mass=scene.billet_mass,
                                  billet_diameter=scene.billet_diameter)
     return "fading" if speed_at(t_exit) < FADING_EXIT_SPEED * speed_at(0.0) else "steady"
