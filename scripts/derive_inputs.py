@@ -112,8 +112,8 @@ def main():
            f"Kirchhoff mean of the handbook table over [T0 = {T0} K, T_s], T_s the surface "
            f"temperature at ignition ({t_lo:.0f}-{t_hi:.0f} K); also the value at the layer's "
            "mid temperature (T0 + T_s)/2.", "",
-           "| quantity | T_s = %.0f K | T_s = %.0f K | mid-T value (T_s = %.0f K) | report Table VI |"
-           % (t_lo, t_hi, t_pivot), "|---|---|---|---|---|"]
+           "| quantity | T_s = %.0f K | T_s = %.0f K | mid-T value (T_s = %.0f K) "
+           "| report Table VI |" % (t_lo, t_hi, t_pivot), "|---|---|---|---|---|"]
     q_k = [layer_mean(FUSED_SILICA_K, t) for t in (t_lo, t_hi)]
     q_c = [layer_mean(FUSED_SILICA_C, t) for t in (t_lo, t_hi)]
     mid = 0.5 * (T0 + t_pivot)
@@ -127,6 +127,7 @@ def main():
     eff_new = math.sqrt(q_k_mid * FUSED_SILICA_RHO * q_c_mid)
     md.append(f"| fused silica effusivity sqrt(k rho c) [W s^0.5/(m^2 K)] | | | "
               f"{eff_new:.0f} (rho 2220, layer means at T_p) | {eff_report:.0f} (rho 2670) |")
+    where = "inside" if min(q_k) <= 1.695 <= max(q_k) else "just outside"
     ratio = [layer_mean(ALUMINA_K, t) / ALUMINA_K[300] for t in (t_lo, t_hi)]
     a_c = [layer_mean(ALUMINA_C, t) for t in (t_lo, t_hi)]
     md.append(f"| alumina k(layer)/k(300 K), dense Al2O3 | {ratio[0]:.3f} | {ratio[1]:.3f} | "
@@ -139,14 +140,15 @@ def main():
     # alumina's. Upper end: half the dense-alumina fall (judgement, no table found).
     a_hi = ALUMINA85_K300[1] * (0.5 + 0.5 * max(ratio))
     md += ["", f"- Fused quartz: k = {min(q_k):.2f}-{max(q_k):.2f} W/(m K) over the ignition "
-           f"range (the report's 1.695 lies {'inside' if min(q_k) <= 1.695 <= max(q_k) else 'outside'}); "
+           f"range (the report's 1.695 lies {where}); "
            f"with the +/-5 % spread of handbook fused-silica k at 300 K, the studies' range is "
            f"{0.95 * min(q_k):.2f}-{1.05 * max(q_k):.2f} W/(m K). Density {FUSED_SILICA_RHO:.0f} "
            f"kg/m^3 and heat capacity {q_c_mid:.0f} J/(kg K) (layer mean at T_p) go with it.",
            f"- 85 % alumina: 14-16 W/(m K) at 300 K times the dense-alumina ratio: "
            f"{a_lo:.1f} (14 W/(m K), T_s = {t_hi:.0f} K) to {a_mid:.1f} (15 W/(m K), T_p); "
            f"up to {a_hi:.1f} W/(m K) if the grade's k falls only half as much (glassy phase). "
-           f"The report's 8.79 W/(m K) lies in that range. Heat capacity {layer_mean(ALUMINA_C, t_pivot):.0f} "
+           "The report's 8.79 W/(m K) lies in that range. Heat capacity "
+           f"{layer_mean(ALUMINA_C, t_pivot):.0f} "
            "J/(kg K) (dense alumina's layer mean at T_p; the report's 753 is alumina at 300 K).",
            ""]
 
@@ -204,7 +206,8 @@ def main():
            f"a log-sd of {s_m:.2f}.",
            f"- Koptelov et al. (2007) collect 38 thermal-analysis E for HMX: 125-216 kJ/mol, "
            f"E/R {e_lo:.0f}-{e_hi_lit:.0f} K. Centred on the report's 26,300 K with the half-width "
-           f"to the lowest published value: E/R uniform on [{e_rep - half:.0f}, {e_rep + half:.0f}] K "
+           "to the lowest published value: E/R uniform on "
+           f"[{e_rep - half:.0f}, {e_rep + half:.0f}] K "
            f"(sd {s_e:.0f} K).",
            f"- Fits agree on the rate where they were measured (about 550 K: Robertson's melt "
            f"544-587 K); carried to T_p = {t_pivot:.0f} K through an E/R of sd {s_e:.0f} K, "
@@ -216,7 +219,8 @@ def main():
     v = (2.0 / 3.0) * math.pi * (5.0 * 0.0254) ** 3
     md += ["## 5. Heat of reaction; second-series billet mass", "",
            "- Q: report 6.66e5 cal/mol / 296.16 g/mol = 2249 cal/g (near HMX's heat of "
-           "combustion, the most any reaction of HMX can release); Rogers (1975): 500 cal/g for the "
+           "combustion, the most any reaction of HMX can release); Rogers (1975): 500 cal/g for "
+           "the "
            "one-step thermal-explosion model. Q multiplies the reaction's heat release like Z, "
            "so it is sampled log-uniformly between the two: geometric centre "
            f"{math.sqrt(500 * 2249):.0f} cal/g.",
