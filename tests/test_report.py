@@ -148,3 +148,21 @@ def test_write_report_writes_every_file(tmp_path):
     assert "| quartz | quartz |" in (tmp_path / "summary.md").read_text()
     curves = xr.open_dataset(tmp_path / "curves.h5", engine="h5netcdf")
     assert "p_go_quartz" in curves and curves["height_ft_quartz"].attrs["units"] == "ft"
+
+
+def test_summary_states_skill_against_base_rate_and_coin(tmp_path):
+    # The synthetic ensemble (H50 2 ft, sigma 0.4) scored on the report's ten quartz drops:
+    # the summary's skill row must carry the scores of skidmc.analysis.skill and the references.
+    from skidmc.analysis.skill import skill_scores
+
+    out = write_report(_ensemble(), tmp_path, source="synthetic.h5",
+                       experiments={"quartz": "quartz"})
+    a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
+    k = skill_scores(a.scores.p_go, a.experiment.drops.went)
+    text = (tmp_path / "summary.md").read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| quartz | 10 (4) |"))
+    assert f"{k.log_score:.3g}" in row and f"{k.log_score_base_rate:.3g}" in row
+    assert "0.693" in row and "0.25" in row
+    assert k.verdict("log") in row and k.verdict("brier") in row
+    # Ten drops: a reliability diagram.
+    assert "reliability_quartz.png" in {p.name for p in out["files"]}
