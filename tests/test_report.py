@@ -166,3 +166,57 @@ def test_summary_states_skill_against_base_rate_and_coin(tmp_path):
     assert k.verdict("log") in row and k.verdict("brier") in row
     # Ten drops: a reliability diagram.
     assert "reliability_quartz.png" in {p.name for p in out["files"]}
+
+
+def test_figures_count_drops_per_height_and_name_the_report_lines():
+    # The report's ten quartz drops sit at two heights: one marker per height and outcome, each
+    # with its count (Table III: 5 no-go at 1.5 ft; 4 go and 1 no-go at 2.12 ft), the observed
+    # go fraction 4/5 at 2.12 ft, and the report's 1.8 ft (up-and-down) and 1.25 ft (Table VIII).
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from skidmc.analysis.report import _draw_drops, _report_lines
+
+    a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
+    fig, ax = plt.subplots()
+    _draw_drops(ax, a.experiment.drops)
+    _report_lines(ax, a)
+    assert sorted(t.get_text() for t in ax.texts) == ["1 no-go", "4 go", "5 no-go"]
+    fractions = [line for line in ax.get_lines() if line.get_marker() == "D"]
+    assert len(fractions) == 1 and fractions[0].get_ydata()[0] == pytest.approx(0.8)
+    labels = [line.get_label() for line in ax.get_lines()]
+    assert any("up-and-down" in lab for lab in labels)
+    assert any("Table VIII" in lab for lab in labels)
+    assert not any("(updown)" in lab or "lower_bound" in lab for lab in labels)
+    plt.close(fig)
+
+
+def test_sobol_figure_ranks_inputs_and_names_them_with_units():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from skidmc.analysis.sensitivity import input_label, plot_indices
+
+    assert input_label("target.conductivity") == "target conductivity k [W/(m K)]"
+    assert input_label("mu") == "friction coefficient mu [-]"
+    assert input_label("kinetics.rate_at_reference") == "reaction rate at T_ref [1/s]"
+    res = xr.Dataset(
+        {k: ("parameter", v) for k, v in {
+            "S1": [0.1, 0.6, 0.2], "S1_low": [0.0, 0.5, 0.1], "S1_high": [0.2, 0.7, 0.3],
+            "ST": [0.1, 0.7, 0.2], "ST_low": [0.0, 0.6, 0.1], "ST_high": [0.2, 0.8, 0.3],
+            "S1_contains_zero": [True, False, False], "ST_contains_zero": [True, False, False],
+        }.items()},
+        coords={"parameter": ["angle", "mu", "flow_stress"]},
+        attrs={"interval": "bca", "confidence": 0.95, "N": 512})
+    fig, ax = plt.subplots()
+    plot_indices(ax, res)
+    names = [t.get_text() for t in ax.get_yticklabels()]
+    # inverted y axis: rank 1 (largest ST) drawn on top, i.e. first tick label
+    assert names == ["friction coefficient mu [-]", "billet flow stress sigma [Pa]",
+                     "impact angle phi [deg]"]
+    assert "bootstrap BCa 95 % intervals" in ax.get_title()
+    plt.close(fig)

@@ -673,7 +673,6 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str
 _QUALIFIER_WORDS = {
     "updown": "report's experimental 50 % height (up-and-down method, Table II)",
     "approximate": "report's estimated 50 % height (~, too few drops for up-and-down; Table II)",
-    "lower_bound": "report: no event up to this height (Table II: >)",
     "": "report's experimental 50 % height (Table IX)",
 }
 
@@ -727,7 +726,7 @@ def _report_lines(ax, a: SceneAnalysis) -> None:
     if math.isfinite(exp.h50):
         if exp.h50_qualifier == "lower_bound":
             ax.axvline(exp.h50, color="k", ls=":", lw=1,
-                       label=f"{_QUALIFIER_WORDS['lower_bound']} {exp.h50:g} ft")
+                       label=f"report: no event up to {exp.h50:g} ft (Table II: > {exp.h50:g})")
             ax.annotate("", xy=(exp.h50 * 2.5, 0.5), xytext=(exp.h50, 0.5),
                         arrowprops={"arrowstyle": "->", "color": "k"})
         else:
@@ -880,11 +879,12 @@ def _qq_figure(plt, out: Path, with_qq: list[SceneAnalysis]) -> Path:
     fig, axes = plt.subplots(rows, cols, figsize=(3.9 * cols, 3.6 * rows), squeeze=False)
     for ax, a in zip(axes.flat, with_qq):
         plot_qq(ax, a.fit)
-        for text in ax.get_legend().get_texts() if ax.get_legend() else []:
-            if "uncensored" in text.get_text():
-                text.set_text("model samples (uncensored)")
-            elif text.get_text() == "1:1":
-                text.set_text("on the fitted log-normal")
+        for artist in ax.get_lines() + ax.collections:
+            label = str(artist.get_label())
+            if "uncensored" in label:
+                artist.set_label("model samples (uncensored)")
+            elif label == "1:1":
+                artist.set_label("on the fitted log-normal")
         ax.set_xlabel("fitted log-normal quantile [ft]", fontsize=8)
         ax.set_ylabel("model samples: critical height [ft]", fontsize=8)
         _log_ticks(ax.xaxis)
