@@ -220,3 +220,24 @@ def test_sobol_figure_ranks_inputs_and_names_them_with_units():
                      "impact angle phi [deg]"]
     assert "bootstrap BCa 95 % intervals" in ax.get_title()
     plt.close(fig)
+
+
+def test_convergence_plot_gives_every_input_its_own_colour():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgb
+
+    from skidmc.analysis.sensitivity import plot_convergence
+
+    names = [f"x{i}" for i in range(13)]
+    shape = (3, len(names))
+    vals = np.zeros(shape)
+    conv = xr.Dataset({k: (("N", "parameter"), vals) for k in ("ST", "ST_low", "ST_high")},
+                      coords={"N": [128, 256, 512], "parameter": names})
+    fig, ax = plt.subplots()
+    plot_convergence(ax, conv, index="ST", legend=False)
+    colours = {to_rgb(line.get_color()) for line in ax.get_lines()}
+    assert len(colours) == len(names)
+    plt.close(fig)

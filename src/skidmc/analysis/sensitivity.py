@@ -941,8 +941,8 @@ def plot_indices(ax, res: xr.Dataset, indices: Sequence[str] = ("S1", "ST")):
 def plot_convergence(ax, conv: xr.Dataset, index: str = "ST", *, legend: bool = True):
     """One index against N with its interval band, one line per parameter.
 
-    Every input gets its own colour and marker (up to 20 inputs from the ``tab20`` palette,
-    markers cycling), named in words with its unit (:func:`input_label`).
+    Every input gets its own colour and marker (up to 20 distinct colours: ``tab10`` and ten
+    named ones; markers cycling), named in words with its unit (:func:`input_label`).
 
     Parameters
     ----------
@@ -961,11 +961,15 @@ def plot_convergence(ax, conv: xr.Dataset, index: str = "ST", *, legend: bool = 
     import matplotlib.ticker
 
     n = conv["N"].values
-    palette = matplotlib.colormaps["tab20"].colors
+    # tab10, then ten more colours far from every tab10 one (its light tab20 partners would
+    # read as the same input).
+    palette = list(matplotlib.colormaps["tab10"].colors) + [
+        "black", "darkgoldenrod", "teal", "navy", "lime", "maroon", "indigo", "salmon",
+        "olive", "slategray"]
     markers = "os^vD<>pPX*h"
     for j, name in enumerate(conv["parameter"].values):
         sel = conv.sel(parameter=name)
-        color = palette[(2 * j) % 20 if j < 10 else (2 * j + 1) % 20]
+        color = palette[j % len(palette)]
         ax.plot(n, sel[index].values, marker=markers[j % len(markers)], color=color,
                 label=input_label(str(name)))
         ax.fill_between(n, sel[f"{index}_low"].values, sel[f"{index}_high"].values,
