@@ -241,3 +241,18 @@ def test_convergence_plot_gives_every_input_its_own_colour():
     colours = {to_rgb(line.get_color()) for line in ax.get_lines()}
     assert len(colours) == len(names)
     plt.close(fig)
+
+
+def test_summary_says_whether_the_experiment_lies_in_the_band(tmp_path):
+    # Synthetic H50 = 2 ft with a narrow sampling interval (400 samples): the report's 1.8 ft
+    # lies below it; the row also carries the report's own calculation (Table VIII: 1.25 ft).
+    from skidmc.analysis.report import _inside_band
+
+    a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
+    _, low, high = a.predicted_h50()
+    assert 1.8 < low < 2.0 < high  # the premise: 400 samples pin H50 within a few percent
+    assert _inside_band(a) == "no (below the band)"
+    write_report(_ensemble(), tmp_path, source="synthetic.h5", experiments={"quartz": "quartz"})
+    row = next(line for line in (tmp_path / "summary.md").read_text().splitlines()
+               if line.startswith("| quartz | quartz |"))
+    assert "| 1.25 | no (below the band) |" in row

@@ -509,6 +509,22 @@ def _sobol_rows(res: xr.Dataset) -> list[str]:
     return rows
 
 
+def _inside_band(a: SceneAnalysis) -> str:
+    """Whether the report's experimental 50 % height lies in the predicted H50 band (a finding,
+    stated in words; for a lower bound: whether the band reaches above it)."""
+    exp = a.experiment
+    _, low, high = a.predicted_h50()
+    if exp is None or not (math.isfinite(low) and math.isfinite(high)) or not math.isfinite(
+            exp.h50):
+        return "-"
+    if exp.h50_qualifier == "lower_bound":
+        return (f"consistent (band reaches above {exp.h50:g})" if high > exp.h50
+                else f"no (whole band below {exp.h50:g})")
+    if low <= exp.h50 <= high:
+        return "yes"
+    return "no (below the band)" if exp.h50 < low else "no (above the band)"
+
+
 def _skill(a: SceneAnalysis):
     """Scores of the fitted P(go | H) at the target's drops, with references (or None)."""
     if a.scores is None or a.experiment is None or a.experiment.drops is None:
@@ -609,8 +625,9 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str
     if with_exp:
         lines += ["", "## Against the experiments", "",
                   "| scene | experiment | predicted H50 [ft] | experimental H50 [ft] | report | "
+                  "report's calculation [ft] | experiment in the predicted band? | "
                   "drops | log-likelihood | Brier | log score |",
-                  "|---|---|---|---|---|---|---|---|---|"]
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for a in with_exp:
             s = a.scores
             exp = a.experiment
@@ -619,6 +636,8 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str
             lines.append(
                 f"| {a.scene} | {exp.name} | {_triple(a.predicted_h50())} | "
                 f"{_triple(a.experimental_h50())} | {report} | "
+                f"{_fmt(experiments_module.report_calculated_height(exp.name))} | "
+                f"{_inside_band(a)} | "
                 f"{0 if exp.drops is None else len(exp.drops)} | "
                 f"{_fmt(s.log_likelihood) if s else '-'} | {_fmt(s.brier) if s else '-'} | "
                 f"{_fmt(s.log_score) if s else '-'} |")
@@ -664,6 +683,11 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str) -> str
                                     if any(_skill(a) is not None
                                            and _skill(a).n >= MIN_DROPS_RELIABILITY
                                            for a in analyses) else "")
+              + (", `h50_vs_mu.png` (second series: H50 against friction, the report's "
+                 "Fig. 6 with bands)"
+                 if sum(a.experiment is not None and a.fit is not None
+                        and a.experiment.name.startswith("series2_") for a in analyses) >= 2
+                 else "")
               + (", `sobol_<scene>.png`" if with_sobol else "") + ". Numbers: "
               "`summary.json`; curves: `curves.h5`."]
     return "\n".join(lines) + "\n"
@@ -829,8 +853,8 @@ def _h50_figure(plt, out: Path, comparable: list[SceneAnalysis]) -> Path:
     ax.set_yscale("log")
     _log_ticks(ax.xaxis)
     _log_ticks(ax.yaxis)
-    ax.set_xlabel("experimental 50 % height [ft]\n(bars: 95 % probit interval; arrows: open "
-                  "bounds, e.g. > 150 ft for gold)", fontsize=9)
+    ax.set_xlabel("experimental 50 % height [ft]\n(bars: 95 % probit interval where the drops "
+                  "are listed; arrows: open bounds)", fontsize=9)
     ax.set_ylabel("predicted H50 [ft] (median, bars 5-95 %)", fontsize=9)
     ax.set_title("Predicted against experimental 50 % heights", fontsize=10)
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
