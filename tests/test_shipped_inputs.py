@@ -82,3 +82,28 @@ def test_no_floor_takes_the_grit_20_friction():
     study = load_hazard_study(ROOT / "studies" / "hazard-handling.toml")
     for s in study.surfaces:
         assert s.friction.frozen.median() < 0.2, s.material
+
+
+def _derive_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("derive_inputs",
+                                                  ROOT / "scripts" / "derive_inputs.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_layer_mean_is_the_kirchhoff_mean_of_the_table():
+    d = _derive_module()
+    # A linear table averages to its value at the mid temperature; the trapezoid rule on 401
+    # points is exact for piecewise-linear integrands up to the kinks (1e-9 relative).
+    table = {300: 1.0, 800: 2.0}
+    assert d.layer_mean(table, 700.0, t0=300.0) == pytest.approx(1.4, rel=1e-9)
+    # Fused silica between 300 and 600 K (Incropera Table A.2 values in the script):
+    # (1.38 + 1.51)/2 * 100 + (1.51 + 1.75)/2 * 200 over 300 K, within the 401-point rule's
+    # kink error (a node falls off the 400 K kink: < 1e-4 relative).
+    expected = ((1.38 + 1.51) / 2 * 100 + (1.51 + 1.75) / 2 * 200) / 300
+    assert d.layer_mean(d.FUSED_SILICA_K, 600.0, t0=300.0) == pytest.approx(expected, rel=1e-4)
+    # The report's 85 % alumina and fused quartz conductivities lie in the derived ranges.
+    assert 14.0 * d.layer_mean(d.ALUMINA_K, 766.0) / 36.0 <= 8.79
