@@ -153,3 +153,19 @@ def test_unknown_experiment_lists_the_known_ones():
 
     with pytest.raises(ValueError, match="experiment = 'quarts'.*quartz"):
         get_experiment("quarts")
+
+
+def test_report_calculated_height_and_friction_follow_tables_viii_and_ix():
+    from skidmc.analysis.experiments import experiment_friction, report_calculated_height
+
+    # Table VIII (first series) and Table IX (second series, in its printed order).
+    assert report_calculated_height("quartz") == 1.25
+    assert report_calculated_height("gold") == 515.0
+    assert report_calculated_height("alumina_50_80", units="m") == pytest.approx(14.2 * 0.3048)
+    assert [report_calculated_height(f"series2_{i}") for i in range(1, 6)] == [
+        3.76, 1.48, 1.0, 0.61, 0.28]
+    assert [experiment_friction(f"series2_{i}") for i in range(1, 6)] == [
+        0.056, 0.092, 0.114, 0.151, 0.243]
+    assert experiment_friction("alumina_20_35") == 0.0576
+    with pytest.raises(ValueError, match="experiment = 'nope'"):
+        report_calculated_height("nope")

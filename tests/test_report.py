@@ -148,3 +148,111 @@ def test_write_report_writes_every_file(tmp_path):
     assert "| quartz | quartz |" in (tmp_path / "summary.md").read_text()
     curves = xr.open_dataset(tmp_path / "curves.h5", engine="h5netcdf")
     assert "p_go_quartz" in curves and curves["height_ft_quartz"].attrs["units"] == "ft"
+
+
+def test_summary_states_skill_against_base_rate_and_coin(tmp_path):
+    # The synthetic ensemble (H50 2 ft, sigma 0.4) scored on the report's ten quartz drops:
+    # the summary's skill row must carry the scores of skidmc.analysis.skill and the references.
+    from skidmc.analysis.skill import skill_scores
+
+    out = write_report(_ensemble(), tmp_path, source="synthetic.h5",
+                       experiments={"quartz": "quartz"})
+    a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
+    k = skill_scores(a.scores.p_go, a.experiment.drops.went)
+    text = (tmp_path / "summary.md").read_text()
+    row = next(line for line in text.splitlines() if line.startswith("| quartz | 10 (4) |"))
+    assert f"{k.log_score:.3g}" in row and f"{k.log_score_base_rate:.3g}" in row
+    assert "0.693" in row and "0.25" in row
+    assert k.verdict("log") in row and k.verdict("brier") in row
+    # Ten drops: a reliability diagram.
+    assert "reliability_quartz.png" in {p.name for p in out["files"]}
+
+
+def test_figures_count_drops_per_height_and_name_the_report_lines():
+    # The report's ten quartz drops sit at two heights: one marker per height and outcome, each
+    # with its count (Table III: 5 no-go at 1.5 ft; 4 go and 1 no-go at 2.12 ft), the observed
+    # go fraction 4/5 at 2.12 ft, and the report's 1.8 ft (up-and-down) and 1.25 ft (Table VIII).
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from skidmc.analysis.report import _draw_drops, _report_lines
+
+    a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
+    fig, ax = plt.subplots()
+    _draw_drops(ax, a.experiment.drops)
+    _report_lines(ax, a)
+    assert sorted(t.get_text() for t in ax.texts) == ["1 no-go", "4 go", "5 no-go"]
+    fractions = [line for line in ax.get_lines() if line.get_marker() == "D"]
+    assert len(fractions) == 1 and fractions[0].get_ydata()[0] == pytest.approx(0.8)
+    labels = [line.get_label() for line in ax.get_lines()]
+    assert any("up-and-down" in lab for lab in labels)
+    assert any("Table VIII" in lab for lab in labels)
+    assert not any("(updown)" in lab or "lower_bound" in lab for lab in labels)
+    plt.close(fig)
+
+
+def test_sobol_figure_ranks_inputs_and_names_them_with_units():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from skidmc.analysis.sensitivity import input_label, plot_indices
+
+    assert input_label("target.conductivity") == "target conductivity k [W/(m K)]"
+    assert input_label("mu") == "friction coefficient mu [-]"
+    assert input_label("kinetics.rate_at_reference") == "reaction rate at T_ref [1/s]"
+    res = xr.Dataset(
+        {k: ("parameter", v) for k, v in {
+            "S1": [0.1, 0.6, 0.2], "S1_low": [0.0, 0.5, 0.1], "S1_high": [0.2, 0.7, 0.3],
+            "ST": [0.1, 0.7, 0.2], "ST_low": [0.0, 0.6, 0.1], "ST_high": [0.2, 0.8, 0.3],
+            "S1_contains_zero": [True, False, False], "ST_contains_zero": [True, False, False],
+        }.items()},
+        coords={"parameter": ["angle", "mu", "flow_stress"]},
+        attrs={"interval": "bca", "confidence": 0.95, "N": 512})
+    fig, ax = plt.subplots()
+    plot_indices(ax, res)
+    names = [t.get_text() for t in ax.get_yticklabels()]
+    # inverted y axis: rank 1 (largest ST) drawn on top, i.e. first tick label
+    assert names == ["friction coefficient mu [-]", "billet flow stress sigma [Pa]",
+                     "impact angle phi [deg]"]
+    assert "bootstrap BCa 95 % intervals" in ax.get_title()
+    plt.close(fig)
+
+
+def test_convergence_plot_gives_every_input_its_own_colour():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import to_rgb
+
+    from skidmc.analysis.sensitivity import plot_convergence
+
+    names = [f"x{i}" for i in range(13)]
+    shape = (3, len(names))
+    vals = np.zeros(shape)
+    conv = xr.Dataset({k: (("N", "parameter"), vals) for k in ("ST", "ST_low", "ST_high")},
+                      coords={"N": [128, 256, 512], "parameter": names})
+    fig, ax = plt.subplots()
+    plot_convergence(ax, conv, index="ST", legend=False)
+    colours = {to_rgb(line.get_color()) for line in ax.get_lines()}
+    assert len(colours) == len(names)
+    plt.close(fig)
+
+
+def test_summary_says_whether_the_experiment_lies_in_the_band(tmp_path):
+    # Synthetic H50 = 2 ft with a narrow sampling interval (400 samples): the report's 1.8 ft
+    # lies below it; the row also carries the report's own calculation (Table VIII: 1.25 ft).
+    from skidmc.analysis.report import _inside_band
+
+    a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
+    _, low, high = a.predicted_h50()
+    assert 1.8 < low < 2.0 < high  # the premise: 400 samples pin H50 within a few percent
+    assert _inside_band(a) == "no (below the band)"
+    write_report(_ensemble(), tmp_path, source="synthetic.h5", experiments={"quartz": "quartz"})
+    row = next(line for line in (tmp_path / "summary.md").read_text().splitlines()
+               if line.startswith("| quartz | quartz |"))
+    assert "| 1.25 | no (below the band) |" in row

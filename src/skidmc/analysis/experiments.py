@@ -28,10 +28,12 @@ __all__ = [
     "DropSeries",
     "Experiment",
     "get_experiment",
+    "experiment_friction",
     "experimental_h50",
     "load_drops",
     "measured_friction",
     "read_table",
+    "report_calculated_height",
     "second_series",
 ]
 
@@ -399,3 +401,36 @@ def get_experiment(name: str, units: str = "ft") -> Experiment:
     return Experiment(name, EXPERIMENTS[name], drops, float(h50.h50_experimental),
                       str(h50.qualifier.item()), units,
                       f"drops: {drops.source}; 50 % heights: {table.attrs['source']}")
+
+
+def report_calculated_height(name: str, units: str = "ft") -> float:
+    """The report's own calculated height for an experiment's target and finish [``units``].
+
+    Table VIII (first series: "calculated 50 % drop height") or Table IX (second series:
+    "calculated critical drop height"); NaN for a name without one.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`EXPERIMENTS`.
+    units : {"ft", "m"}, optional
+    """
+    if name not in EXPERIMENTS:
+        raise ValueError(f"experiment = {name!r}: choose from {', '.join(EXPERIMENTS)}")
+    if name.startswith("series2_"):
+        row = second_series(units).isel(surface=int(name.split("_")[1]) - 1)
+        return float(row.h_calculated_report)
+    table = experimental_h50(units)
+    if name not in table["target"].values:
+        return math.nan
+    return float(table["h50_calculated_report"].sel(target=name))
+
+
+def experiment_friction(name: str) -> float:
+    """The friction coefficient the report tabulates for an experiment's finish [-] (Table V for
+    the first series, Tables I and IX for the second)."""
+    if name not in EXPERIMENTS:
+        raise ValueError(f"experiment = {name!r}: choose from {', '.join(EXPERIMENTS)}")
+    if name.startswith("series2_"):  # Table IX's row (Table I lists the finishes otherwise)
+        return float(second_series()["friction"][int(name.split("_")[1]) - 1])
+    return float(measured_friction()["friction"].sel(surface=name))

@@ -39,6 +39,7 @@ __all__ = [
     "grow_until_stable",
     "interval_half_width",
     "morris_screening",
+    "input_label",
     "plot_convergence",
     "plot_indices",
     "prepare_output",
@@ -837,8 +838,54 @@ def morris_screening(problem: dict, X, Y, *, num_levels: int = 4, confidence: fl
 # --------------------------------------------------------------------------- figures
 
 
+#: Short readable names of sampled keys for figures; the unit is added from the key's table
+#: (:data:`skidmc.scene.keys.INPUT_KEYS`). Keys missing here fall back to the key itself.
+_SHORT_NAMES = {
+    "mu": "friction coefficient mu",
+    "flow_stress": "billet flow stress sigma",
+    "billet_mass": "billet mass W",
+    "billet_diameter": "billet diameter D",
+    "angle": "impact angle phi",
+    "tilt": "billet tilt psi",
+    "initial_temperature": "initial temperature T0",
+    "he.density": "HE density",
+    "he.heat_capacity": "HE heat capacity",
+    "he.conductivity": "HE conductivity",
+    "he.heat_of_fusion": "HE heat of fusion",
+    "he.melting_point": "HE melting point",
+    "kinetics.prefactor": "Arrhenius prefactor Z",
+    "kinetics.activation_temperature": "activation temperature E/R",
+    "kinetics.heat_of_reaction": "heat of reaction Q",
+    "kinetics.rate_at_reference": "reaction rate at T_ref",
+    "target.density": "target density",
+    "target.heat_capacity": "target heat capacity",
+    "target.conductivity": "target conductivity k",
+}
+
+#: Words for the bootstrap interval types of :func:`sobol_indices`.
+_INTERVAL_WORDS = {"bca": "bootstrap BCa", "percentile": "bootstrap percentile"}
+
+
+def input_label(key: str) -> str:
+    """A figure label for a sampled input: short name and SI unit (``"target conductivity k
+    [W/(m K)]"``); the key itself for an unknown key."""
+    from skidmc.scene.keys import INPUT_KEYS
+
+    units = {k.key: k.si_unit for k in INPUT_KEYS}
+    units.setdefault("kinetics.rate_at_reference", "1/s")
+    unit = units.get(key)
+    name = _SHORT_NAMES.get(key, key)
+    if unit is None:
+        return name
+    return f"{name} [{'-' if unit == '1' else unit}]"
+
+
 def plot_indices(ax, res: xr.Dataset, indices: Sequence[str] = ("S1", "ST")):
-    """Bar chart of the indices with their asymmetric intervals; hatched where it contains 0.
+    """Horizontal bars of the indices, ranked by total index (largest on top), with their
+    asymmetric intervals; hatched where the interval contains 0.
+
+    Inputs are named in words with their units (:func:`input_label`); the title states the
+    interval (bootstrap BCa or percentile, its confidence) and N.
 
     Parameters
     ----------
@@ -851,32 +898,43 @@ def plot_indices(ax, res: xr.Dataset, indices: Sequence[str] = ("S1", "ST")):
     -------
     matplotlib.axes.Axes
     """
-    names = [str(v) for v in res["parameter"].values]
-    x = np.arange(len(names))
-    width = 0.8 / len(indices)
+    rank_by = "ST" if "ST" in indices else indices[0]
+    order = np.argsort(-np.nan_to_num(res[rank_by].values, nan=-np.inf))
+    res = res.isel(parameter=order)
+    names = [input_label(str(v)) for v in res["parameter"].values]
+    y = np.arange(len(names))
+    height = 0.8 / len(indices)
+    words = {"S1": "first order S1", "ST": "total ST"}
     for i, index in enumerate(indices):
         est = res[index].values
         err = np.vstack([est - res[f"{index}_low"].values, res[f"{index}_high"].values - est])
         flagged = res[f"{index}_contains_zero"].values
-        bars = ax.bar(x + (i - (len(indices) - 1) / 2) * width, est, width, label=index,
-                      yerr=np.clip(err, 0.0, None), capsize=3)
+        bars = ax.barh(y + (i - (len(indices) - 1) / 2) * height, est, height,
+                       label=words.get(index, index), xerr=np.clip(err, 0.0, None), capsize=2,
+                       color=f"C{i}")
         for bar, flag in zip(bars, flagged):
             if flag:
                 bar.set_hatch("//")
                 bar.set_alpha(0.5)
-    ax.axhline(0.0, color="black", linewidth=0.8)
-    ax.set_xticks(x)
-    ax.set_xticklabels(names, rotation=30, ha="right")
-    ax.set_ylabel("Sobol' index [1]")
-    ax.set_title(f"{res.attrs.get('interval', '')} {100 * res.attrs.get('confidence', 0):g} % "
-                 f"intervals, N = {res.attrs.get('N', '?')} (hatched: interval contains 0)",
-                 fontsize="small")
-    ax.legend()
+    ax.axvline(0.0, color="black", linewidth=0.8)
+    ax.set_yticks(y)
+    ax.set_yticklabels(names, fontsize=8)
+    ax.invert_yaxis()  # rank 1 on top
+    ax.set_xlabel("Sobol' index of ln H_c [-] (share of its variance)")
+    interval = _INTERVAL_WORDS.get(str(res.attrs.get("interval", "")),
+                                   str(res.attrs.get("interval", "")))
+    ax.set_title(f"ranked by {words.get(rank_by, rank_by)}; N = {res.attrs.get('N', '?')}; "
+                 f"bars: {interval} {100 * res.attrs.get('confidence', 0):g} % intervals\n"
+                 "(hatched: interval contains 0)", fontsize="small")
+    ax.legend(fontsize=8, loc="lower right")
     return ax
 
 
-def plot_convergence(ax, conv: xr.Dataset, index: str = "ST"):
+def plot_convergence(ax, conv: xr.Dataset, index: str = "ST", *, legend: bool = True):
     """One index against N with its interval band, one line per parameter.
+
+    Every input gets its own colour and marker (up to 20 distinct colours: ``tab10`` and ten
+    named ones; markers cycling), named in words with its unit (:func:`input_label`).
 
     Parameters
     ----------
@@ -884,20 +942,35 @@ def plot_convergence(ax, conv: xr.Dataset, index: str = "ST"):
     conv : xarray.Dataset
         A result of :func:`sobol_convergence` (or the history of :func:`grow_until_stable`).
     index : {"S1", "ST"}
+    legend : bool
+        Draw the legend on `ax` (a figure with several panels may draw one for all).
 
     Returns
     -------
     matplotlib.axes.Axes
     """
-    n = conv["N"].values
-    for name in conv["parameter"].values:
-        sel = conv.sel(parameter=name)
-        (line,) = ax.plot(n, sel[index].values, marker="o", label=str(name))
-        ax.fill_between(n, sel[f"{index}_low"].values, sel[f"{index}_high"].values,
-                        color=line.get_color(), alpha=0.2)
-    ax.set_xscale("log", base=2)
-    ax.set_xlabel("base rows N")
-    ax.set_ylabel(f"{index} [1]")
-    ax.legend()
-    return ax
+    import matplotlib
+    import matplotlib.ticker
 
+    n = conv["N"].values
+    # tab10, then ten more colours far from every tab10 one (its light tab20 partners would
+    # read as the same input).
+    palette = list(matplotlib.colormaps["tab10"].colors) + [
+        "black", "darkgoldenrod", "teal", "navy", "lime", "maroon", "indigo", "salmon",
+        "olive", "slategray"]
+    markers = "os^vD<>pPX*h"
+    for j, name in enumerate(conv["parameter"].values):
+        sel = conv.sel(parameter=name)
+        color = palette[j % len(palette)]
+        ax.plot(n, sel[index].values, marker=markers[j % len(markers)], color=color,
+                label=input_label(str(name)))
+        ax.fill_between(n, sel[f"{index}_low"].values, sel[f"{index}_high"].values,
+                        color=color, alpha=0.15)
+    ax.set_xscale("log", base=2)
+    ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.set_xlabel("base rows N")
+    interval = _INTERVAL_WORDS.get(str(conv.attrs.get("interval", "")), "interval")
+    ax.set_ylabel(f"{index} [-] (bands: {interval})")
+    if legend:
+        ax.legend(fontsize=7)
+    return ax

@@ -96,9 +96,11 @@ _SECOND_SERIES_UNGIVEN = {
     "angle": "60 deg",
 }
 _SECOND_SERIES_ASSUMPTION_NOTE = (
-    "ASSUMPTION: billet mass 25.3 lb (not in the report) - the value that reproduces Table IX's "
-    "calculated heights within 3 % for all five mu; 30 deg approach (phi = 60 deg) as in the first "
-    "series. See results/validation/second_series.md."
+    "ASSUMPTION: billet mass 25.3 lb (not in the report) - FITTED: the value that reproduces "
+    "Table IX's calculated heights within 3 % for all five mu (19.1 lb with a flow stress of "
+    "38,240 psi instead of the stated 34,400 does the same); a 10-in. hemisphere of PBX density "
+    "weighs only 17.4-18.5 lb. 30 deg approach (phi = 60 deg) as in the first series. See "
+    "results/validation/second_series.md and docs/inputs.md."
 )
 
 # --- the presets -------------------------------------------------------------------------------
