@@ -303,7 +303,7 @@ def test_run_into_an_impossible_out_says_why(tmp_path, tiny, cli_runs, capsys, w
 
 def test_run_workers_must_be_positive_and_many_warn(tmp_path, tiny, cli_runs, capsys,
                                                     monkeypatch):
-    from skidmc import cli
+    from skidmc.ensemble import executors
 
     for bad in ("0", "-2", "two"):
         with pytest.raises(SystemExit) as info:
@@ -311,7 +311,7 @@ def test_run_workers_must_be_positive_and_many_warn(tmp_path, tiny, cli_runs, ca
         assert info.value.code == 2
         assert "argument --workers:" in capsys.readouterr().err
     assert cli_runs == [] and not (tmp_path / "w.h5").exists()
-    monkeypatch.setattr(cli, "_cpus", lambda: 1)
+    monkeypatch.setattr(executors, "default_workers", lambda: 1)
     try:
         assert main(["run", str(tiny), "--out", str(tmp_path / "w.h5"), "--workers", "3",
                      "--quiet"]) == 0

@@ -10,7 +10,7 @@ import pytest
 from conftest import fake_height
 
 from skidmc.analysis import open_ensemble
-from skidmc.analysis.sobol_study import run_until_stable
+from skidmc.workflows.sobol import run_until_stable
 from skidmc.ensemble.run import run_study
 from skidmc.ensemble.study import StudyError, parse_study
 

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import enum
 import errno
 import math
 import os
@@ -62,10 +63,14 @@ from skidmc.scene import DESCRIPTIONS, NUMERIC_KEYS, SI_UNITS
 
 __all__ = [
     "CHUNK_BYTES",
+    "EVALUATIONS_FORMAT",
     "FORMAT",
     "PAGE_BYTES",
     "EnsembleFile",
+    "EvaluationLog",
+    "LoggedCall",
     "SceneSummary",
+    "Status",
     "StorageError",
     "VariableSpec",
     "default_path",
@@ -831,3 +836,229 @@ def _unnest(ds, n_epistemic: int):
     coords = {k: v for k, v in ds.coords.items() if "sample" not in v.dims}
     coords.update(epistemic=np.arange(n_epistemic), sample=np.arange(n_aleatory))
     return xr.Dataset(out, coords=coords, attrs=ds.attrs)
+
+
+# --- the solver calls of an adaptive study --------------------------------------------------------
+
+
+#: Value of the ``skidmc_format`` attribute of an evaluation log (:class:`EvaluationLog`).
+EVALUATIONS_FORMAT = "skidmc-evaluations 1"
+
+
+class Status(enum.IntEnum):
+    """A solver outcome as a small integer (CF ``flag_values`` / ``flag_meanings``)."""
+
+    NOT_RUN = 0
+    OK = 1
+    CENSORED_ABOVE = 2
+    CENSORED_BELOW = 3
+    FAILED = 4
+
+    @property
+    def word(self) -> str:
+        """The status word of ensemble files and :class:`~skidmc.ensemble.evaluate.BatchResult`
+        (``""`` for NOT_RUN)."""
+        return "" if self is Status.NOT_RUN else self.name.lower()
+
+    @classmethod
+    def codes(cls, words) -> np.ndarray:
+        """Status words -> codes (uint8); anything unknown counts as FAILED."""
+        table = {s.word: int(s) for s in cls}
+        return np.array([table.get(str(w), int(cls.FAILED)) for w in np.ravel(words)],
+                        dtype=np.uint8)
+
+    @classmethod
+    def flag_attrs(cls) -> dict:
+        """CF attributes of a status variable."""
+        return {"flag_values": np.array([int(s) for s in cls], dtype=np.uint8),
+                "flag_meanings": " ".join(s.name.lower() for s in cls)}
+
+
+@dataclasses.dataclass(frozen=True)
+class LoggedCall:
+    """One solver call kept by an :class:`EvaluationLog`.
+
+    Attributes
+    ----------
+    digest : str
+        sha256 of what was asked (inputs, base scene, solver options).
+    critical_height : numpy.ndarray
+        [m], one per scene of the call.
+    status : numpy.ndarray
+        Status words (``ok``, ``censored_above``, ``censored_below``, ``failed``).
+    failure_reason : numpy.ndarray
+        Text, ``""`` where none.
+    """
+
+    digest: str
+    critical_height: np.ndarray
+    status: np.ndarray
+    failure_reason: np.ndarray
+
+
+class EvaluationLog:
+    """The solver calls of an adaptive study, kept so that a run resumes and a report replays.
+
+    An adaptive estimator (the hazard study's importance sampling) decides its next solver call
+    from the previous ones, so its work is a sequence of calls rather than a design of samples.
+    Given its seeds the sequence is deterministic: replaying the kept answers of calls 0..k-1
+    brings the estimator to call k with the same state, and the numbers of a resumed run are
+    those of an uninterrupted one. Each call is checked by the digest of what it asked (inputs,
+    base scene, solver options): a call that asks something else (other code, another study)
+    ends the replay there and is computed.
+
+    Layout. While running, one small HDF5 file per call in ``<path>.calls/`` (written under a
+    temporary name, then renamed: a kill -9 leaves whole calls or none). When the run completes
+    the calls are gathered into one file at `path` (``complete = 1``; every variable
+    compressed with shuffle + gzip and checksummed with Fletcher-32), and the folder removed.
+    Inputs are not stored: the replay recomputes them from the study's seeds and checks them
+    against the digest. Variables (dimension ``row``, all calls one after another): ``call``
+    (the call of each row), ``critical_height`` [m], ``status`` (:class:`Status` codes, CF
+    flags), ``failure_reason`` (index into the ``reasons`` table, -1 for none); per call
+    ``digest``.
+
+    Parameters
+    ----------
+    path : path
+        The gathered file (``evaluations.h5``).
+    attrs : mapping
+        Global attributes (``study_sha256``, ``study_text``, ...); a log whose ``study_sha256``
+        differs is not resumed.
+    """
+
+    def __init__(self, path: str | os.PathLike, attrs: Mapping) -> None:
+        self.path = Path(path)
+        self.folder = self.path.with_name(self.path.name + ".calls")
+        self.attrs = dict(attrs)
+
+    # -- reading
+
+    def info(self) -> dict:
+        """``{"exists", "complete", "study_sha256", "calls"}`` of what is on disk."""
+        if self.path.is_file():
+            with _open(self.path, "r") as f:
+                return {"exists": True, "complete": bool(f.attrs.get("complete", 0)),
+                        "study_sha256": str(f.attrs.get("study_sha256", "")),
+                        "calls": int(f["digest"].shape[0]) if "digest" in f else 0}
+        calls = sorted(self.folder.glob("*.h5")) if self.folder.is_dir() else []
+        return {"exists": bool(calls), "complete": False,
+                "study_sha256": self._folder_sha(), "calls": len(calls)}
+
+    def _folder_sha(self) -> str:
+        marker = self.folder / "study_sha256"
+        return marker.read_text().strip() if marker.is_file() else ""
+
+    def load(self) -> list[LoggedCall]:
+        """Every kept call, in order (verified: a damaged file raises StorageError)."""
+        if self.path.is_file():
+            verify_file(self.path)
+            with _open(self.path, "r") as f:
+                call = f["call"][:]
+                heights, codes = f["critical_height"][:], f["status"][:]
+                index = f["failure_reason"][:]
+                reasons = np.array([r.decode("utf-8") for r in f["reasons"][:]] + [""],
+                                   dtype=object)
+                digests = [d.decode("ascii") for d in f["digest"][:]]
+            words = np.array([Status(int(c)).word for c in codes], dtype=object)
+            text = reasons[index]  # -1 -> the "" appended
+            return [LoggedCall(d, heights[call == i], words[call == i], text[call == i])
+                    for i, d in enumerate(digests)]
+        out = []
+        for i in range(len(list(self.folder.glob("*.h5"))) if self.folder.is_dir() else 0):
+            part = self.folder / f"{i:06d}.h5"
+            if not part.is_file():
+                break
+            try:
+                verify_file(part)
+                with _open(part, "r") as f:
+                    out.append(LoggedCall(
+                        str(f.attrs["digest"]), f["critical_height"][:],
+                        np.array([Status(int(c)).word for c in f["status"][:]], dtype=object),
+                        np.array([r.decode("utf-8") for r in f["failure_reason"][:]],
+                                 dtype=object)))
+            except (StorageError, KeyError, OSError):
+                break  # a damaged call and those after it are computed again
+        return out
+
+    # -- writing
+
+    def start(self, *, keep: bool) -> None:
+        """Begin a run: keep the calls on disk (resume) or discard them (a new run)."""
+        if not keep:
+            self.discard()
+        if self.path.is_file():  # a complete log being resumed: unpack it into calls
+            calls = self.load()
+            self.path.unlink()
+            self.folder.mkdir(parents=True, exist_ok=True)
+            (self.folder / "study_sha256").write_text(str(self.attrs.get("study_sha256", "")))
+            for i, c in enumerate(calls):
+                self._write_call(i, c)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        (self.folder / "study_sha256").write_text(str(self.attrs.get("study_sha256", "")))
+
+    def discard(self) -> None:
+        """Remove the log (file and folder)."""
+        self.path.unlink(missing_ok=True)
+        if self.folder.is_dir():
+            for p in self.folder.iterdir():
+                p.unlink()
+            self.folder.rmdir()
+
+    def drop_from(self, index: int) -> None:
+        """Forget calls `index`, `index` + 1, ... (they asked something else)."""
+        for p in sorted(self.folder.glob("*.h5")):
+            if int(p.stem) >= index:
+                p.unlink()
+
+    def append(self, index: int, call: LoggedCall) -> None:
+        """Keep call number `index` (crash-safe: written aside, then renamed)."""
+        self._write_call(index, call)
+
+    def _write_call(self, index: int, call: LoggedCall) -> None:
+        final = self.folder / f"{index:06d}.h5"
+        tmp = final.with_suffix(".tmp")
+        with h5py.File(tmp, "w") as f:
+            f.attrs["digest"] = call.digest
+            kw = {"fletcher32": True} if len(call.critical_height) else {}
+            f.create_dataset("critical_height", data=np.asarray(call.critical_height, float), **kw)
+            f.create_dataset("status", data=Status.codes(call.status), **kw)
+            f.create_dataset("failure_reason", data=np.array(
+                [str(r).encode("utf-8") for r in call.failure_reason], dtype=object),
+                dtype=h5py.string_dtype("utf-8"))
+        os.replace(tmp, final)
+
+    def complete(self, calls: list[LoggedCall]) -> None:
+        """Gather `calls` into the one file at `path` (atomically) and remove the folder."""
+        reasons = sorted({str(r) for c in calls for r in c.failure_reason if r})
+        rank = {r: i for i, r in enumerate(reasons)}
+        call = np.concatenate([np.full(len(c.critical_height), i, dtype=np.int32)
+                               for i, c in enumerate(calls)] or [np.zeros(0, np.int32)])
+        heights = np.concatenate([np.asarray(c.critical_height, float) for c in calls]
+                                 or [np.zeros(0)])
+        codes = np.concatenate([Status.codes(c.status) for c in calls]
+                               or [np.zeros(0, np.uint8)])
+        index = np.concatenate([np.array([rank[str(r)] if r else -1 for r in c.failure_reason],
+                                         dtype=np.int32) for c in calls]
+                               or [np.zeros(0, np.int32)])
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        kw = {"shuffle": True, "compression": "gzip", "fletcher32": True} if len(call) else {}
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update({"skidmc_format": EVALUATIONS_FORMAT,
+                            "skidmc_version": _version(), "complete": np.int8(1),
+                            "completed": timestamp(), **self.attrs})
+            f.create_dataset("call", data=call, **kw)
+            f.create_dataset("critical_height", data=heights, **kw).attrs["units"] = "m"
+            f.create_dataset("status", data=codes, **kw).attrs.update(Status.flag_attrs())
+            f.create_dataset("failure_reason", data=index, **kw).attrs["comment"] = (
+                "index into reasons; -1: none")
+            f.create_dataset("reasons", data=np.array([r.encode("utf-8") for r in reasons],
+                                                      dtype=object),
+                             dtype=h5py.string_dtype("utf-8"))
+            f.create_dataset("digest", data=np.array([c.digest.encode("ascii") for c in calls],
+                                                     dtype="S64"))
+        os.replace(tmp, self.path)
+        if self.folder.is_dir():
+            for p in self.folder.iterdir():
+                p.unlink()
+            self.folder.rmdir()

@@ -7,6 +7,9 @@ run with a :class:`StudyError` naming the file, the key and the value. The forma
     [study]
     name = "paper-quartz-mu"            # results go to results/<name>/ensemble.h5
     description = "..."
+    # kind = "ensemble"                 # or "sobol" (grows N to n_max); without it: "sobol"
+    #                                   # for a saltelli design with n_max, else "ensemble"
+    #                                   # (skidmc.workflows.registry)
 
     [scene]                             # one scene: a preset plus overrides (units allowed) ...
     preset = "paper-quartz"
@@ -168,7 +171,7 @@ __all__ = [
 ]
 
 _TOP_LEVEL = ("study", "scene", "scenes", "uncertain", "correlation", "design", "solver")
-_STUDY_KEYS = ("name", "description")
+_STUDY_KEYS = ("name", "description", "kind")
 _SCENE_RESERVED = ("name", "preset", "uncertain", "experiment")
 _DIST_META = ("distribution", "source", "relative", "reference_temperature", "kind")
 _DESIGN_KEYS = ("method", "n", "seed", "second_order", "n_epistemic", "n_max",
@@ -313,6 +316,7 @@ class _Parser:
             raise self.error("study.name", name, "must be letters, digits, '.', '_' or '-' "
                              "(it names the results folder)")
         description = self.string(head, "description", "study", required=False)
+        self.string(head, "kind", "study", required=False)  # its name: skidmc.workflows
 
         common = self.uncertain(doc.get("uncertain", {}), "uncertain")
         scenes, scene_dimension = self.scenes(common)

@@ -207,7 +207,7 @@ class DesignSpec:
         Epistemic draws of a nested design (0: not nested); each gets `n` aleatory samples.
     n_max : int
         ``saltelli`` only: grow N (doubling, reusing the rows computed) up to this until the
-        indices are stable (0: run N only); see :mod:`skidmc.analysis.sobol_study`.
+        indices are stable (0: run N only); see :mod:`skidmc.workflows.sobol`.
     stable_threshold, stable_half_width : float
         The stability rule: every index whose interval reaches above the threshold has an
         interval half-width of at most `stable_half_width` [1].
