@@ -18,14 +18,14 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from skidmc.analysis.hazard import drop_height_probability
+from skidmc.analysis.rare_events import rare_event_probability
+from skidmc.ensemble.hazard_study import load_hazard_study, parse_hazard_study
 from skidmc.workflows.hazard import (
     FRAGILITY_FACTORS,
     categorical_critical_height,
     run_hazard_study,
 )
-from skidmc.analysis.hazard import drop_height_probability
-from skidmc.analysis.rare_events import rare_event_probability
-from skidmc.ensemble.hazard_study import load_hazard_study, parse_hazard_study
 
 PSI = 6894.757293168361
 DROP_LOG_SD = 0.5

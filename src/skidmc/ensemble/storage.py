@@ -934,11 +934,13 @@ class EvaluationLog:
     # -- reading
 
     def info(self) -> dict:
-        """``{"exists", "complete", "study_sha256", "calls"}`` of what is on disk."""
+        """``{"exists", "complete", "study_sha256", "calls"}`` of what is on disk (and
+        ``study_file`` once gathered)."""
         if self.path.is_file():
             with _open(self.path, "r") as f:
                 return {"exists": True, "complete": bool(f.attrs.get("complete", 0)),
                         "study_sha256": str(f.attrs.get("study_sha256", "")),
+                        "study_file": str(f.attrs.get("study_file", "")),
                         "calls": int(f["digest"].shape[0]) if "digest" in f else 0}
         calls = sorted(self.folder.glob("*.h5")) if self.folder.is_dir() else []
         return {"exists": bool(calls), "complete": False,

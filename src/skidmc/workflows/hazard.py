@@ -89,9 +89,11 @@ DESCRIPTION = "the probability per handling accident that a dropped billet react
 RUN_OPTIONS = frozenset({"out", "resume", "force", "workers", "scheduler"})
 REPORT_OPTIONS = frozenset({"out"})
 REFUSED = {
-    "n": "the estimator stops at [hazard.estimator] target_cov or max_runs (set those instead)",
+    "n": "the estimator stops at [hazard.estimator] target_cov or max_runs (set those "
+         "instead)",
     "chunk_size": "its solver calls are the estimator's batches",
-    "confidence": f"its intervals are the estimator's {CONFIDENCE:.0%} ones, fixed when it ran",
+    "confidence": f"its intervals are the estimator's {CONFIDENCE * 100:g} % ones, fixed when "
+                  "it ran",
 }
 
 #: Quantiles of the epistemic band of P [1].
@@ -776,7 +778,7 @@ def run(study: HazardStudy, options):
         raise StorageError(path, f"holds an unfinished run ({info['calls']} solver calls kept): "
                            "skidmc run --resume continues it, --force starts over")
     summary_ok = _summary_sha(folder) == study.sha256 and (folder / "summary.md").is_file()
-    if summary_ok and (info["complete"] or not info["exists"]):
+    if summary_ok and not options.force and (info["complete"] or not info["exists"]):
         return Outcome(0, folder / "summary.md", () if options.quiet else (
             f"{folder / 'summary.md'}: up to date (a complete run of this study); nothing "
             "computed (--force recomputes it)",))
@@ -802,7 +804,7 @@ def run(study: HazardStudy, options):
     low, high = result.interval
     lines = () if options.quiet else (
         f"skidmc run: P(reaction per accident) = {result.probability:.3g} [{low:.3g}, "
-        f"{high:.3g}] ({CONFIDENCE:.0%}), {result.runs['total']} solver runs; "
+        f"{high:.3g}] ({CONFIDENCE * 100:g} %), {result.runs['total']} solver runs; "
         f"{folder / 'summary.md'}",)
     return Outcome(0, folder / "summary.md", lines)
 
@@ -813,9 +815,11 @@ def report(target, options):
     from skidmc.workflows.registry import Outcome
 
     if isinstance(target, Path):
+        from skidmc.ensemble.storage import EvaluationLog
         from skidmc.workflows.registry import study_of_result
 
-        study = load_hazard_study_text(study_of_result(target), str(target))
+        file = EvaluationLog(target, {}).info().get("study_file") or str(target)
+        study = load_hazard_study_text(study_of_result(target), file)
         path = target
     else:
         study = target
