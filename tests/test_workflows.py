@@ -235,3 +235,45 @@ def test_recorder_replays_and_forgets_a_diverging_tail(tmp_path):
     again({"mu": np.array([0.1, 0.2])}, "opts", base=base)       # kept: replayed
     again({"mu": np.array([0.5])}, "opts", base=base)            # another question
     assert again.computed == 1 and len(list(log.folder.glob("*.h5"))) == 2
+
+
+# --- the growing Sobol' kind: resume with the numbers of an uninterrupted run ---------------------
+
+_CALLS = {"n": 0, "stop_at": -1}
+
+
+def _interrupting_fake(scene, rtol=1e-3, tier="full", h_min=1e-3, h_max=1e4):
+    """conftest.fake_height, with Ctrl-C at call number _CALLS["stop_at"] (in-process runs)."""
+    from conftest import fake_height
+
+    _CALLS["n"] += 1
+    if _CALLS["n"] == _CALLS["stop_at"]:
+        raise KeyboardInterrupt
+    return fake_height(scene, rtol, tier, h_min, h_max)
+
+
+@pytest.mark.parametrize("where", ["first step", "growth step"])
+def test_sobol_run_resumes_with_the_numbers_of_an_uninterrupted_run(tmp_path, capsys, where):
+    from test_sobol_study import GROWING
+
+    from skidmc.ensemble.storage import open_ensemble
+
+    study = tmp_path / "grow.toml"
+    study.write_text(GROWING.replace("n_max = 8192", "n_max = 16"))  # two steps: N = 8, 16
+    _CALLS.update(n=0, stop_at=-1)
+    base = ["run", str(study), "--workers", "1", "--chunk-size", "4", "--quiet"]
+    assert main([*base, "--out", str(tmp_path / "a.h5")], solver=_interrupting_fake) == 0
+    first_rows = 8 * (3 + 2)   # N (d + 2) rows of the first step
+    _CALLS.update(n=0, stop_at=first_rows // 2 if where == "first step" else first_rows + 7)
+    assert main([*base, "--out", str(tmp_path / "b.h5")], solver=_interrupting_fake) == 130
+    assert "interrupted" in capsys.readouterr().err
+    if where == "first step":  # an unfinished file is continued only with --resume
+        assert main([*base, "--out", str(tmp_path / "b.h5")], solver=_interrupting_fake) == 2
+        assert "--resume" in capsys.readouterr().err
+    _CALLS.update(stop_at=-1)
+    assert main([*base, "--out", str(tmp_path / "b.h5"), "--resume"],
+                solver=_interrupting_fake) == 0
+    a, b = open_ensemble(tmp_path / "a.h5"), open_ensemble(tmp_path / "b.h5")
+    assert a.sizes == b.sizes and a.sizes["sample"] == 16 * (3 + 2)
+    for name in ("mu", "critical_height", "status"):
+        assert np.array_equal(a[name].values, b[name].values), name

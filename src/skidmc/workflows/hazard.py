@@ -266,11 +266,15 @@ class _Tally:
 
 def _physical(d: Distribution, nominal: float):
     """The frozen distribution of d's values [SI]: a relative one scaled by `nominal`."""
-    if not d.relative:
-        return d.frozen
+    return _scaled(d, nominal) if d.relative else d.frozen
+
+
+def _scaled(d: Distribution, factor: float):
+    """d's frozen distribution with its loc and scale times `factor` (the distribution of
+    factor x X: a relative one on its nominal value, a drop height with its median moved)."""
     params = dict(d.params)
-    params["loc"] = params.get("loc", 0.0) * nominal
-    params["scale"] = params.get("scale", 1.0) * nominal
+    params["loc"] = params.get("loc", 0.0) * factor
+    params["scale"] = params.get("scale", 1.0) * factor
     return getattr(stats, d.name)(**params)
 
 
@@ -403,14 +407,6 @@ def _design_log_density(est: _Estimate) -> float:
     with np.errstate(divide="ignore"):
         log_s = float(drop.logsf(est.result.design_critical_height))
     return math.log(est.surface.weight) + log_s - 0.5 * float(u @ u)
-
-
-def _scaled_drop(d: Distribution, factor: float):
-    """d's drop-height distribution scaled by `factor` (its median times factor)."""
-    params = dict(d.params)
-    params["loc"] = params.get("loc", 0.0) * factor
-    params["scale"] = params.get("scale", 1.0) * factor
-    return getattr(stats, d.name)(**params)
 
 
 def _reweighted(results: list[tuple[float, DropHeightResult]], drop) -> tuple[float, float]:
@@ -877,7 +873,7 @@ def _fragility(study: HazardStudy, pooled: list[_Estimate], outer) -> dict[str, 
     out: dict[str, list[float]] = {"median": [], "probability": [], "cov": [], "band_low": [],
                                    "band_high": []}
     for factor in FRAGILITY_FACTORS:
-        drop = _scaled_drop(study.drop_height, factor)
+        drop = _scaled(study.drop_height, factor)
         p, se = _reweighted(strata, drop)
         out["median"].append(median * factor)
         out["probability"].append(p)
