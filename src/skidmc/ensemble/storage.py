@@ -65,11 +65,13 @@ __all__ = [
     "CHUNK_BYTES",
     "EVALUATIONS_FORMAT",
     "FORMAT",
+    "FORMATS",
     "PAGE_BYTES",
     "EnsembleFile",
     "EvaluationLog",
     "LoggedCall",
     "SceneSummary",
+    "compact_file",
     "Status",
     "StorageError",
     "VariableSpec",
@@ -83,7 +85,15 @@ __all__ = [
 ]
 
 #: Value of the ``skidmc_format`` attribute that marks an ensemble file (and its version).
-FORMAT = "skidmc-ensemble 1"
+#: Version 2: a complete file is compacted (:func:`compact_file`); version 1 files (never
+#: compacted) are still read and resumed.
+FORMAT = "skidmc-ensemble 2"
+
+#: Every ensemble format this module reads.
+FORMATS = ("skidmc-ensemble 1", FORMAT)
+
+#: Samples per HDF5 chunk of a compacted file (compressed chunks, read whole).
+COMPACT_CHUNK = 1 << 15
 
 #: Values of ``status``.
 STATUSES = ("ok", "censored_above", "censored_below", "failed")
@@ -340,7 +350,7 @@ def inspect_file(path: str | os.PathLike, *, verify: bool = False) -> dict:
     with _open(path, "r") as f:
         try:
             attrs = dict(f.attrs)
-            if attrs.get("skidmc_format") != FORMAT or "done" not in f:
+            if attrs.get("skidmc_format") not in FORMATS or "done" not in f:
                 return {"skidmc": False, "format": attrs.get("skidmc_format")}
             done = f["done"][:]
         except (OSError, KeyError, RuntimeError, ValueError) as exc:
@@ -357,6 +367,7 @@ def inspect_file(path: str | os.PathLike, *, verify: bool = False) -> dict:
         "study_sha256": attrs.get("study_sha256"),
         "history": attrs.get("history", ""),
         "completed": attrs.get("completed", ""),
+        "compact": bool(attrs.get("compact", 0)),
     }
 
 
@@ -447,6 +458,9 @@ class EnsembleFile:
             raise StorageError(
                 path, f"holds {info['n_rows']} samples per scene, this run asks for "
                 f"{study.n_rows} (a different --n?); resume with the same n or use another --out")
+        if info["compact"]:
+            raise StorageError(path, "is a complete, compacted result: nothing to resume "
+                               "(skidmc run --force recomputes it)")
         f = _open(path, "r+")
         out = cls(path, f, study)
         if history:
@@ -671,6 +685,147 @@ def _decode_chars(chars: np.ndarray) -> np.ndarray:
     return np.char.decode(joined, "utf-8")
 
 
+def _status_words(raw: np.ndarray) -> np.ndarray:
+    """Status as words from either layout: fixed-width chars (appendable) or codes (compact)."""
+    if raw.dtype == "S1":
+        return _decode_chars(raw)
+    return np.array([s.word for s in Status], dtype=object)[raw.astype(np.intp)]
+
+
+def _table_attrs(values: np.ndarray, none: str) -> tuple[np.ndarray, dict]:
+    """Text values -> (uint16 index, CF flag_values / flag_meanings of the distinct values);
+    ``""`` is value 0, meaning `none`."""
+    meanings = ["", *sorted(set(values.ravel().tolist()) - {""})]
+    rank = {m: i for i, m in enumerate(meanings)}
+    index = np.array([rank[v] for v in values.ravel().tolist()],
+                     dtype=np.uint16).reshape(values.shape)
+    return index, {"flag_values": np.arange(len(meanings), dtype=np.uint16),
+                   "flag_meanings": " ".join(m.replace(" ", "_") or none for m in meanings)}
+
+
+def compact_file(path: str | os.PathLike) -> None:
+    """Rewrite a complete ensemble file compactly, in place (atomically: built aside, renamed).
+
+    While a run writes, the file keeps the appendable layout of the module docstring (fixed-size
+    page chunks rewritten in place, fixed-width text). Once complete it is never written again,
+    so it is rewritten: ``status`` as :class:`Status` codes and ``flags`` as indices of their
+    distinct combinations (both CF ``flag_values`` / ``flag_meanings``), ``failure_reason`` as
+    an index (-1: none) into a ``failure_reasons`` table, every input that does not vary within
+    a scene once per scene (attribute ``constant_along = "sample"``), and every variable in
+    chunks of :data:`COMPACT_CHUNK` samples, compressed (HDF5's shuffle + gzip, which h5py,
+    h5netcdf and netCDF read without plugins) and checksummed (Fletcher-32).
+    :func:`open_ensemble` gives back the same Dataset as for the appendable layout.
+    """
+    path = Path(path)
+    verify_file(path)
+    tmp = path.with_name(path.name + ".compact")
+    with _open(path, "r") as src:
+        attrs = dict(src.attrs)
+        if attrs.get("compact"):
+            return
+        multi = "scene" in src
+        n = int(src["done"].shape[0])
+        n_scenes = int(src["scene"].shape[0]) if multi else 0
+        variables = {name: (obj[...], dict(obj.attrs)) for name, obj in src.items()
+                     if isinstance(obj, h5py.Dataset) and not name.startswith("strlen")}
+    lead = ("scene", "sample") if multi else ("sample",)
+    inputs = {*NUMERIC_KEYS, *EXTRA_KEYS}
+
+    def opts(shape) -> dict:
+        if not shape or shape[-1] == 0:
+            return {}
+        chunks = (*(1,) * (len(shape) - 1), min(shape[-1], COMPACT_CHUNK))
+        return {"chunks": chunks, "compression": "gzip", "shuffle": True, "fletcher32": True}
+
+    clean = {k: v for k, v in attrs.items() if k not in ("_NCProperties",)}
+    clean.update({"skidmc_format": FORMAT, "compact": np.int8(1)})
+    with h5netcdf.File(tmp, "w") as f:
+        f.dimensions = {"sample": n, **({"scene": n_scenes} if multi else {})}
+        f.attrs.update(clean)
+        for name, (data, vattrs) in variables.items():
+            vattrs = {k: v for k, v in vattrs.items()
+                      if k not in ("DIMENSION_LIST", "REFERENCE_LIST", "CLASS", "NAME",
+                                   "_Netcdf4Dimid", "_Netcdf4Coordinates", "_Encoding",
+                                   "_FillValue")}
+            if name in ("sample", "done"):
+                dims = ("sample",)
+            elif name == "scene":
+                dims = ("scene",)
+            elif name == "configuration":
+                dims = lead[:-1]
+            else:
+                dims = lead
+            if data.dtype == "S1":  # fixed-width text of the appendable layout
+                text = _decode_chars(data).astype(object)
+                if name == "status":
+                    data = Status.codes(text).reshape(text.shape)
+                    vattrs.update(Status.flag_attrs())
+                elif name == "failure_reason":
+                    reasons = sorted(set(text.ravel().tolist()) - {""})
+                    rank = {r: i for i, r in enumerate(reasons)}
+                    data = np.array([rank.get(r, -1) for r in text.ravel().tolist()],
+                                    dtype=np.int32).reshape(text.shape)
+                    f.dimensions["reason"] = len(reasons)
+                    table = f.create_variable("failure_reasons", ("reason",),
+                                              dtype=h5py.string_dtype())
+                    if reasons:
+                        table[:] = np.array(reasons, dtype=object)
+                    table.attrs.update({"units": "-", "long_name": "distinct failure reasons"})
+                    vattrs["comment"] = "index into failure_reasons; -1: none"
+                else:  # flags
+                    data, flag = _table_attrs(text, "none")
+                    vattrs.update(flag)
+            elif name in inputs and data.ndim == len(lead) and n and np.array_equal(
+                    data, np.broadcast_to(data[..., :1], data.shape), equal_nan=True):
+                data = data[..., 0]
+                dims = dims[:-1]
+                vattrs["constant_along"] = "sample"
+            if data.dtype.kind in "OU":
+                v = f.create_variable(name, dims, dtype=h5py.string_dtype())
+                v[...] = np.asarray(data, dtype=object)
+            else:
+                kw = opts(data.shape) if dims and dims[-1] == "sample" else {}
+                fill = {"fillvalue": np.nan} if data.dtype.kind == "f" else {}
+                v = f.create_variable(name, dims, dtype=data.dtype, data=data, **kw, **fill)
+            v.attrs.update(vattrs)
+    os.replace(tmp, path)
+
+
+def _decode_compact(ds):
+    """The Dataset of a compacted file as that of the appendable layout (words, text, inputs
+    per sample)."""
+    import xarray as xr
+
+    out = {}
+    words = np.array([s.word for s in Status], dtype=object)
+    if "status" in ds and ds["status"].dtype.kind in "iu":
+        out["status"] = ds["status"].copy(data=words[ds["status"].values.astype(np.intp)])
+        for k in ("flag_values", "flag_meanings"):
+            out["status"].attrs.pop(k, None)
+        out["status"].attrs["flag_meanings"] = " ".join(STATUSES)
+    if "flags" in ds and ds["flags"].dtype.kind in "iu":
+        meanings = str(ds["flags"].attrs.get("flag_meanings", "")).split(" ")
+        table = np.array(["" if i == 0 else m for i, m in enumerate(meanings)], dtype=object)
+        out["flags"] = ds["flags"].copy(data=table[ds["flags"].values.astype(np.intp)])
+        for k in ("flag_values", "flag_meanings"):
+            out["flags"].attrs.pop(k, None)
+    if "failure_reason" in ds and ds["failure_reason"].dtype.kind in "iu":
+        reasons = np.array([*(str(r) for r in np.atleast_1d(ds["failure_reasons"].values)),
+                            ""], dtype=object)
+        out["failure_reason"] = ds["failure_reason"].copy(
+            data=reasons[ds["failure_reason"].values.astype(np.intp)])
+        out["failure_reason"].attrs.pop("comment", None)
+    shape = ds["critical_height"]
+    for name, var in ds.data_vars.items():
+        if var.attrs.get("constant_along") == "sample":
+            full = xr.DataArray(np.broadcast_to(var.values[..., None], shape.shape).copy(),
+                                dims=shape.dims, attrs={k: v for k, v in var.attrs.items()
+                                                        if k != "constant_along"})
+            out[name] = full
+    ds = ds.drop_vars([v for v in ("failure_reasons",) if v in ds])
+    return ds.assign(out)
+
+
 def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
     """Per-scene summary of an ensemble file's critical heights (see :class:`SceneSummary`).
 
@@ -685,7 +840,7 @@ def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
             attrs = dict(f.attrs)
             done = f["done"][:].astype(bool)
             heights = np.atleast_2d(f["critical_height"][...])
-            status = _decode_chars(f["status"][...])
+            status = _status_words(f["status"][...])
             names = ([s.decode() if isinstance(s, bytes) else str(s) for s in f["scene"][...]]
                      if "scene" in f else [str(attrs.get("study_name", ""))])
         except (OSError, KeyError, RuntimeError, ValueError) as exc:
@@ -775,6 +930,8 @@ def open_ensemble(path: str | os.PathLike):
         raise StorageError(path, f"is damaged: xarray cannot read it ({exc})",
                            damaged=True) from None
 
+    if ds.attrs.get("compact"):
+        ds = _decode_compact(ds)
     done = ds["done"].values.astype(bool)
     masked = {}
     for name, var in ds.data_vars.items():

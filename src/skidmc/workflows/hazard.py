@@ -241,7 +241,9 @@ class HazardResult:
         out["epistemic_covs"] = self.epistemic_covs.tolist()
         out["epistemic_draws"] = {k: np.asarray(v).tolist()
                                   for k, v in self.epistemic_draws.items()}
-        return _plain(out)
+        from skidmc.analysis.report import json_ready
+
+        return json_ready(out)
 
 
 # --------------------------------------------------------------------------------------------
@@ -887,22 +889,6 @@ def _fragility(study: HazardStudy, pooled: list[_Estimate], outer) -> dict[str, 
 # --------------------------------------------------------------------------------------------
 # output
 # --------------------------------------------------------------------------------------------
-
-
-def _plain(value):
-    """JSON-ready: numpy scalars to Python, non-finite floats to strings."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        value = float(value)
-        return value if math.isfinite(value) else str(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
 
 
 def _unit(key: str) -> str:
