@@ -44,11 +44,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from skidmc.workflows.hazard import categorical_critical_height, run_hazard_study  # noqa: E402
 from skidmc.analysis.hazard import drop_height_probability  # noqa: E402
 from skidmc.analysis.rare_events import rare_event_probability  # noqa: E402
 from skidmc.ensemble.hazard_study import parse_hazard_study  # noqa: E402
 from skidmc.solver import critical_height  # noqa: E402
+from skidmc.workflows.hazard import categorical_critical_height, run_hazard_study  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
 STUDY = ROOT / "studies" / "hazard-handling.toml"
