@@ -216,7 +216,7 @@ def test_damaged_evaluation_log_is_refused_naming_it(tmp_path, capsys):
 def test_recorder_replays_and_forgets_a_diverging_tail(tmp_path):
     from skidmc.ensemble.storage import EvaluationLog
     from skidmc.scene import get_preset
-    from skidmc.workflows.hazard import _Recorder
+    from skidmc.workflows.replay import RecordedSolver
 
     base = get_preset("paper-quartz")
     log = EvaluationLog(tmp_path / "e.h5", {"study_sha256": "x"})
@@ -227,11 +227,11 @@ def test_recorder_replays_and_forgets_a_diverging_tail(tmp_path):
         return types.SimpleNamespace(critical_height=1.0 / mu, status=["ok"] * mu.size,
                                      failure_reason=[""] * mu.size)
 
-    rec = _Recorder(solver, log, False)
+    rec = RecordedSolver(solver, log, False)
     for k in range(3):
         rec({"mu": np.array([0.1, 0.2]) + k}, "opts", base=base)
     assert rec.computed == 6
-    again = _Recorder(solver, log, False)
+    again = RecordedSolver(solver, log, False)
     again({"mu": np.array([0.1, 0.2])}, "opts", base=base)       # kept: replayed
     again({"mu": np.array([0.5])}, "opts", base=base)            # another question
     assert again.computed == 1 and len(list(log.folder.glob("*.h5"))) == 2

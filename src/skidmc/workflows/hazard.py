@@ -44,7 +44,6 @@ U_TAIL`, where the study file's supports were checked), as a study's design is.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import time
@@ -69,6 +68,7 @@ from skidmc.ensemble.study_model import (
 )
 from skidmc.scene import SI_UNITS
 from skidmc.scene.units import from_si
+from skidmc.workflows.replay import RecordedSolver
 
 __all__ = [
     "BAND",
@@ -555,7 +555,7 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
         solver = _with_scheduler(solver, scheduler)
     recorder = None
     if log is not None:
-        solver = recorder = _Recorder(solver, log, replay_only)
+        solver = recorder = RecordedSolver(solver, log, replay_only)
     say = progress or (lambda _line: None)
     options = study.estimator
     tally = _Tally()
@@ -654,61 +654,6 @@ def _with_scheduler(solver: Callable, scheduler) -> Callable:
     def solve(columns, options, **kwargs):
         return solver(columns, options, scheduler=scheduler, **kwargs)
     return solve
-
-
-def _digest(columns: Mapping[str, np.ndarray], options, base) -> str:
-    """sha256 of a solver call: its columns (names and float64 bytes), base scene, options."""
-    h = hashlib.sha256()
-    for key in sorted(columns):
-        h.update(key.encode() + b"\0")
-        h.update(np.ascontiguousarray(columns[key], dtype=np.float64).tobytes())
-    h.update(repr(sorted(base.as_dict().items())).encode())
-    h.update(repr(options).encode())
-    return h.hexdigest()
-
-
-class _Recorder:
-    """The solver, answering from an :class:`~skidmc.ensemble.storage.EvaluationLog` the
-    calls it holds (same digest, same place in the sequence) and keeping every new one."""
-
-    def __init__(self, solver: Callable, log, replay_only: bool) -> None:
-        from skidmc.ensemble.storage import LoggedCall
-
-        self._make = LoggedCall
-        self.solver, self.log, self.replay_only = solver, log, replay_only
-        self.kept = log.load() if log.info()["exists"] else []
-        self.calls: list = []
-        self.computed = 0
-
-    def __call__(self, columns, options, **kwargs):
-        import types
-
-        from skidmc.ensemble.storage import StorageError
-
-        i = len(self.calls)
-        digest = _digest(columns, options, kwargs["base"])
-        if i < len(self.kept) and self.kept[i].digest == digest:
-            call = self.kept[i]
-        else:
-            if self.replay_only:
-                raise StorageError(self.log.path, f"holds {len(self.kept)} solver calls that "
-                                   f"do not cover this study's estimate (call {i} differs or "
-                                   "is missing): finish it with skidmc run --resume, or "
-                                   "recompute it with skidmc run --force")
-            if i < len(self.kept):  # another computation from here on: forget the rest
-                self.kept = self.kept[:i]
-                self.log.drop_from(i)
-            res = self.solver(columns, options, **kwargs)
-            n = len(next(iter(columns.values())))
-            call = self._make(
-                digest, np.asarray(res.critical_height, dtype=float),
-                np.asarray(res.status).astype(str).astype(object),
-                np.asarray(getattr(res, "failure_reason", [""] * n), dtype=object))
-            self.log.append(i, call)
-            self.computed += n
-        self.calls.append(call)
-        return types.SimpleNamespace(critical_height=call.critical_height, status=call.status,
-                                     failure_reason=call.failure_reason)
 
 
 # --------------------------------------------------------------------------------------------
