@@ -67,6 +67,7 @@ __all__ = [
     "FORMAT",
     "FORMATS",
     "PAGE_BYTES",
+    "EnsembleAttrs",
     "EnsembleFile",
     "EvaluationLog",
     "LoggedCall",
@@ -641,6 +642,100 @@ def _global_attrs(study: Study, history: str) -> dict:
 
 
 @dataclasses.dataclass(frozen=True)
+class EnsembleAttrs:
+    """The global attributes of an ensemble file, decoded (written by :func:`_global_attrs`).
+
+    The one place that reads them back: numpy scalars become Python numbers, lists stored as
+    arrays become tuples of str. :func:`open_ensemble` hands them on as
+    ``attrs["design"]`` and ``attrs["solver"]`` (dicts, see there).
+
+    Attributes
+    ----------
+    skidmc_format, skidmc_version : str
+    study_name, study_sha256, study_file, study_text : str
+    design_method : str
+    design_n, design_n_epistemic, seed : int
+    design_keys, design_kinds : tuple of str
+        The design columns and how each is drawn (aleatory, epistemic).
+    saltelli_second_order : bool
+    solver_rtol, solver_h_min, solver_h_max : float
+        [1], [m], [m].
+    solver_tier : str
+    complete : bool
+    created, completed, history : str
+    """
+
+    skidmc_format: str
+    skidmc_version: str
+    study_name: str
+    study_sha256: str
+    study_file: str
+    study_text: str
+    design_method: str
+    design_n: int
+    design_n_epistemic: int
+    seed: int
+    design_keys: tuple[str, ...]
+    design_kinds: tuple[str, ...]
+    saltelli_second_order: bool
+    solver_rtol: float
+    solver_tier: str
+    solver_h_min: float
+    solver_h_max: float
+    complete: bool
+    created: str
+    completed: str
+    history: str
+
+    @classmethod
+    def read(cls, attrs: Mapping) -> EnsembleAttrs:
+        """Decode a file's global attributes (missing ones: empty or zero)."""
+        def scalar(key, default=None):
+            value = attrs.get(key, default)
+            if isinstance(value, np.ndarray) and value.size == 1:
+                value = value.reshape(())[()]
+            return value.item() if isinstance(value, np.generic) else value
+
+        def words(key):
+            value = attrs.get(key, [])
+            return tuple(str(k) for k in np.atleast_1d(value)) if np.size(value) else ()
+
+        return cls(
+            skidmc_format=str(scalar("skidmc_format", "")),
+            skidmc_version=str(scalar("skidmc_version", "")),
+            study_name=str(scalar("study_name", "")),
+            study_sha256=str(scalar("study_sha256", "")),
+            study_file=str(scalar("study_file", "")),
+            study_text=str(scalar("study_text", "")),
+            design_method=str(scalar("design_method", "")),
+            design_n=int(scalar("design_n", 0) or 0),
+            design_n_epistemic=int(scalar("design_n_epistemic", 0) or 0),
+            seed=int(scalar("seed", 0) or 0),
+            design_keys=words("design_keys"), design_kinds=words("design_kinds"),
+            saltelli_second_order=bool(scalar("saltelli_second_order", 0)),
+            solver_rtol=float(scalar("solver_rtol", math.nan)),
+            solver_tier=str(scalar("solver_tier", "")),
+            solver_h_min=float(scalar("solver_h_min", math.nan)),
+            solver_h_max=float(scalar("solver_h_max", math.nan)),
+            complete=bool(scalar("complete", 0)),
+            created=str(scalar("created", "")), completed=str(scalar("completed", "")),
+            history=str(scalar("history", "")))
+
+    @property
+    def design(self) -> dict:
+        """``{"method", "n", "seed", "keys", "second_order", "n_epistemic", "kinds"}``."""
+        return {"method": self.design_method, "n": self.design_n, "seed": self.seed,
+                "keys": list(self.design_keys), "second_order": self.saltelli_second_order,
+                "n_epistemic": self.design_n_epistemic, "kinds": list(self.design_kinds)}
+
+    @property
+    def solver(self) -> dict:
+        """``{"rtol", "tier", "h_min", "h_max"}`` ([1], -, [m], [m])."""
+        return {"rtol": self.solver_rtol, "tier": self.solver_tier, "h_min": self.solver_h_min,
+                "h_max": self.solver_h_max}
+
+
+@dataclasses.dataclass(frozen=True)
 class SceneSummary:
     """The critical heights of one scene of an ensemble file, in a few numbers.
 
@@ -847,8 +942,8 @@ def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
             raise StorageError(path, f"is damaged: its results cannot be read ({exc}); "
                                f"{_DAMAGED_HINT}", damaged=True) from None
     status = np.atleast_2d(status)
-    h_min, h_max = (float(np.ravel(attrs.get(k, np.nan))[0])
-                    for k in ("solver_h_min", "solver_h_max"))
+    meta = EnsembleAttrs.read(attrs)
+    h_min, h_max = meta.solver_h_min, meta.solver_h_max
     out = []
     for name, h, st in zip(names, heights, status):
         h, st = h[done], st[done]
@@ -954,21 +1049,11 @@ def open_ensemble(path: str | os.PathLike):
         raise StorageError(path, f"is damaged: its study text is not valid TOML ({exc})",
                            damaged=True) from None
 
-    def scalar(key):
-        value = attrs.get(key)
-        return value.item() if isinstance(value, np.generic) else value
-
-    keys = attrs.get("design_keys", [])
+    meta = EnsembleAttrs.read(attrs)
     attrs["unfinished"] = int(np.count_nonzero(~done))
     attrs["study"] = study
-    attrs["solver"] = {k: scalar(f"solver_{k}") for k in ("rtol", "tier", "h_min", "h_max")}
-    attrs["design"] = {
-        "method": scalar("design_method"), "n": scalar("design_n"), "seed": scalar("seed"),
-        "keys": [str(k) for k in np.atleast_1d(keys)] if len(np.atleast_1d(keys)) else [],
-        "second_order": bool(scalar("saltelli_second_order")),
-        "n_epistemic": int(scalar("design_n_epistemic") or 0),
-        "kinds": [str(k) for k in np.atleast_1d(attrs.get("design_kinds", []))],
-    }
+    attrs["solver"] = meta.solver
+    attrs["design"] = meta.design
     n_epistemic = attrs["design"]["n_epistemic"]
     if n_epistemic:
         ds = _unnest(ds, n_epistemic)
