@@ -7,7 +7,7 @@ Everything else is the shipped study: five surfaces, friction per surface, angle
 
 Methods, side by side:
 
-1. structured IS, per surface: :func:`skidmc.analysis.handling.run_hazard_study` (drop height
+1. structured IS, per surface: :func:`skidmc.workflows.hazard.run_hazard_study` (drop height
    integrated out, one importance-sampling proposal per surface; what the study run uses);
 2. structured IS, one proposal: :func:`skidmc.analysis.hazard.drop_height_probability` with the
    surface as a categorical input (its coordinate is held at one surface by the mode search);
@@ -44,11 +44,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from skidmc.analysis.handling import categorical_critical_height, run_hazard_study  # noqa: E402
 from skidmc.analysis.hazard import drop_height_probability  # noqa: E402
 from skidmc.analysis.rare_events import rare_event_probability  # noqa: E402
 from skidmc.ensemble.hazard_study import parse_hazard_study  # noqa: E402
 from skidmc.solver import critical_height  # noqa: E402
+from skidmc.workflows.hazard import categorical_critical_height, run_hazard_study  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
 STUDY = ROOT / "studies" / "hazard-handling.toml"
@@ -168,7 +168,7 @@ def write(rows, reference, load) -> None:
         "Why per surface: the structured estimator's mode search holds a categorical input at "
         "one value, so a single proposal is centred on one surface's initiating combination "
         "and samples the others where their reactions are not; stratifying by surface gives "
-        "each its own proposal and sums the strata exactly (`skidmc.analysis.handling`).",
+        "each its own proposal and sums the strata exactly (`skidmc.workflows.hazard`).",
         "",
     ]
     (OUT / "hazard.md").write_text("\n".join(lines), encoding="utf-8")

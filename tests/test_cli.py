@@ -216,7 +216,11 @@ def test_run_parses_its_options_into_the_run(tmp_path, tiny, cli_runs, capsys):
     assert captured.out.strip() == str(out) and captured.err == ""  # --quiet
     with h5py.File(out, "r") as f:
         assert f["done"].shape == (5,) and f["done"][:].all()
-        assert "stand-in failure" in b"".join(f["failure_reason"][0, 0]).decode()  # injected
+        assert f.attrs["compact"] == 1  # a complete file is compacted
+    from skidmc.ensemble.storage import open_ensemble
+
+    assert "stand-in failure" in open_ensemble(out)["failure_reason"].values[0, 0]  # injected
+    with h5py.File(out, "r") as f:
         assert f.attrs["history"].splitlines()[0].endswith(
             f"{call['command']}: started with 0 of 5 samples written")
 
@@ -312,7 +316,7 @@ def test_run_into_an_impossible_out_says_why(tmp_path, tiny, cli_runs, capsys, w
 
 def test_run_workers_must_be_positive_and_many_warn(tmp_path, tiny, cli_runs, capsys,
                                                     monkeypatch):
-    from skidmc import cli
+    from skidmc.ensemble import executors
 
     for bad in ("0", "-2", "two"):
         with pytest.raises(SystemExit) as info:
@@ -320,7 +324,7 @@ def test_run_workers_must_be_positive_and_many_warn(tmp_path, tiny, cli_runs, ca
         assert info.value.code == 2
         assert "argument --workers:" in capsys.readouterr().err
     assert cli_runs == [] and not (tmp_path / "w.h5").exists()
-    monkeypatch.setattr(cli, "_cpus", lambda: 1)
+    monkeypatch.setattr(executors, "default_workers", lambda: 1)
     try:
         assert main(["run", str(tiny), "--out", str(tmp_path / "w.h5"), "--workers", "3",
                      "--quiet"]) == 0

@@ -18,14 +18,14 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from skidmc.analysis.handling import (
+from skidmc.analysis.hazard import drop_height_probability
+from skidmc.analysis.rare_events import rare_event_probability
+from skidmc.ensemble.hazard_study import load_hazard_study, parse_hazard_study
+from skidmc.workflows.hazard import (
     FRAGILITY_FACTORS,
     categorical_critical_height,
     run_hazard_study,
 )
-from skidmc.analysis.hazard import drop_height_probability
-from skidmc.analysis.rare_events import rare_event_probability
-from skidmc.ensemble.hazard_study import load_hazard_study, parse_hazard_study
 
 PSI = 6894.757293168361
 DROP_LOG_SD = 0.5
@@ -314,7 +314,7 @@ def test_structured_estimator_on_a_surface_alone_matches_the_run():
     study = parse_hazard_study(STUDY.replace("epistemic_draws = 4", "epistemic_draws = 0"))
     solver = StandIn()
     result = run_hazard_study(study, None, solver=solver)
-    from skidmc.analysis.handling import _CriticalHeight, _marginals, _Tally
+    from skidmc.workflows.hazard import _CriticalHeight, _marginals, _Tally
 
     surface = study.surfaces[1]
     keys = (*study.aleatory_keys, *study.epistemic_keys)

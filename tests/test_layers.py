@@ -23,8 +23,9 @@ LAYERS = {
     "skidmc.solver": 3,
     "skidmc.ensemble": 4,
     "skidmc.analysis": 5,
-    "skidmc.cli": 6,
-    "skidmc.__main__": 6,
+    "skidmc.workflows": 6,      # the kinds of study: runners over ensemble and analysis
+    "skidmc.cli": 7,
+    "skidmc.__main__": 7,
 }
 
 

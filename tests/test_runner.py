@@ -27,7 +27,7 @@ from skidmc.ensemble import evaluate as evaluate_module
 from skidmc.ensemble import executors, schedule
 from skidmc.ensemble.batch import evaluate_batch
 from skidmc.ensemble.run import execute_study, run_study
-from skidmc.ensemble.storage import StorageError, inspect_file
+from skidmc.ensemble.storage import StorageError, inspect_file, open_ensemble
 from skidmc.ensemble.study import SolverOptions
 from skidmc.scene import get_preset
 
@@ -45,8 +45,7 @@ real_solver = pytest.mark.skipif(not _solver_available(), reason="skidmc.solver 
 
 def _data(path) -> xr.Dataset:
     """The data of a result file without its attributes (timestamps and history differ)."""
-    with xr.open_dataset(path) as ds:
-        return ds.load().drop_attrs()
+    return open_ensemble(path).drop_attrs()
 
 
 def _assert_same_data(a, b):
@@ -171,7 +170,7 @@ def test_evaluate_batch_real_solver_and_censoring():
 def test_failing_samples_never_stop_the_run(tmp_path, study_file, ):
     path = run_study(study_file, tmp_path / "out", workers=1, progress=False, solver=fake_height)
     assert path == tmp_path / "out" / "ensemble.h5"
-    ds = xr.open_dataset(path)
+    ds = open_ensemble(path)
     status = ds.status.values
     assert ds.attrs["complete"] == 1
     assert set(status.ravel()) <= {"ok", "failed"} and "failed" in status  # mu > 0.15 fails
@@ -186,7 +185,7 @@ def test_single_scene_study(tmp_path, ):
     path = tmp_path / "one.toml"
     path.write_text(TINY.split("[[scenes]]")[0] + '[scene]\npreset = "paper-quartz"\n'
                     + TINY[TINY.index("[uncertain.mu]"):])
-    ds = xr.open_dataset(run_study(path, tmp_path / "one.h5", workers=1, progress=False,
+    ds = open_ensemble(run_study(path, tmp_path / "one.h5", workers=1, progress=False,
                                    solver=fake_height))
     assert ds.critical_height.dims == ("sample",) and ds.sizes["sample"] == 12
     assert "" not in ds.status.values and ds.attrs["complete"] == 1
@@ -214,7 +213,7 @@ def test_a_sample_that_kills_its_worker_is_isolated(tmp_path, study_file,
     monkeypatch.setattr(schedule, "evaluate_chunk", crashing)
     path = run_study(study_file, tmp_path / "o.h5", workers=1, chunk_size=4, progress=False,
                      solver=fake_height)
-    ds = xr.open_dataset(path)
+    ds = open_ensemble(path)
     assert list(ds.status.values[:, 3]) == ["failed", "failed"]
     assert "worker process died" in ds.failure_reason.values[0, 3]
     others = np.delete(ds.status.values, 3, axis=1)
@@ -326,7 +325,7 @@ def reference(tmp_path_factory):
     d = tmp_path_factory.mktemp("reference")
     (d / "tiny.toml").write_text(TINY)
     path = run_study(d / "tiny.toml", d / "ref.h5", workers=1, chunk_size=12, progress=False)
-    status = xr.open_dataset(path).status.values
+    status = open_ensemble(path).status.values
     assert set(status.ravel()) == {"ok"}, status
     return path
 
@@ -442,7 +441,7 @@ def test_a_crashing_worker_process_costs_only_its_sample(tmp_path, study_file):
                   solver=crashing_height)
     finally:
         executors.shutdown_workers()
-    ds = xr.open_dataset(out)
+    ds = open_ensemble(out)
     crashed = ds.mu.values > 0.14
     assert crashed.any() and (~crashed).any()
     # Every sample of a scene where it crashed is failed, as the crash took the whole sample

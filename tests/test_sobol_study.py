@@ -10,9 +10,9 @@ import pytest
 from conftest import fake_height
 
 from skidmc.analysis import open_ensemble
-from skidmc.analysis.sobol_study import run_until_stable
 from skidmc.ensemble.run import run_study
 from skidmc.ensemble.study import StudyError, parse_study
+from skidmc.workflows.sobol import run_until_stable
 
 # ln H = 2 ln(0.132 / mu) + 0.5 ln(k / 1.69) + const in the stand-in solver: mu dominates,
 # the conductivity matters a little, the activation temperature not at all.

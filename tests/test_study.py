@@ -37,6 +37,7 @@ from skidmc.ensemble.study import (
     parse_study,
 )
 from skidmc.scene import get_preset
+from skidmc.workflows import registry
 
 ROOT = Path(__file__).resolve().parents[1]
 # Ensemble studies; hazard studies ([hazard] table) have their own format and tests
@@ -113,6 +114,7 @@ def test_paper_series2_finishes():
 
 def test_malformed_corpus_is_large_enough():
     assert len(MALFORMED) >= 30
+    assert sum(is_hazard_study(p) for p in MALFORMED) >= 5  # hazard mistakes too
 
 
 @pytest.mark.parametrize("path", MALFORMED, ids=[p.stem for p in MALFORMED])
@@ -121,7 +123,7 @@ def test_malformed_study_is_rejected(path):
     error = getattr(errors, expected["error"], None) or {"StudyError": StudyError}[
         expected["error"]]
     with pytest.raises(error) as info:
-        load_study(path)
+        registry.load(path)  # the kind looked up as `skidmc run` does (hazard files too)
     err = info.value
     assert isinstance(err, ValueError)
     assert err.key == expected["key"], str(err)

@@ -46,7 +46,7 @@ _LAZY = {
     "run_study": "skidmc.ensemble.run",
     "evaluate_batch": "skidmc.ensemble.batch",
     # analysis
-    "open_ensemble": "skidmc.analysis",
+    "open_ensemble": "skidmc.ensemble.storage",
     # errors
     "SkidmcError": "skidmc.errors",
     "SceneError": "skidmc.errors",

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from collections.abc import Sequence
 
@@ -50,13 +49,6 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
     return value
-
-
-def _cpus() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def _parse_sets(items: Sequence[str]) -> dict[str, str]:
@@ -267,10 +259,13 @@ def _add_run_parser(subparsers) -> None:
         "result file of the same study (same text, same n) is up to date: its summary is "
         "printed and nothing is computed (--force recomputes it).",
     )
-    run.add_argument("study", help="study file (TOML)")
+    run.add_argument("study", help="study file (TOML): an ensemble, a growing Sobol' study "
+                     "or a hazard study (skidmc.workflows); an option a kind does not take is "
+                     "refused, naming it")
     run.add_argument("--out", help="result file (.h5) or folder (default: "
-                     "results/<study name>/ensemble.h5)")
-    run.add_argument("--n", type=_positive_int, help="samples per scene (default: the study's)")
+                     "results/<study name>/, ensemble.h5 or evaluations.h5)")
+    run.add_argument("--n", type=_positive_int, help="samples per scene (default: the study's; "
+                     "a growing Sobol' study starts at this N)")
     run.add_argument("--workers", type=_positive_int,
                      help="parallel workers, >= 1 (default: all CPUs)")
     run.add_argument("--scheduler", metavar="{local,dask,tcp://host:port}",
@@ -292,145 +287,43 @@ def _add_run_parser(subparsers) -> None:
 WORKERS_PER_CPU_WARNING = 2
 
 
-def _num(value: float) -> str:
-    """3 significant digits without an exponent in the usual range of heights."""
-    if 1000 <= abs(value) < 1e7:
-        return f"{value:.0f}"
-    return f"{value:.3g}"
-
-
-def _heights(values, bounds) -> str:
-    """``"60.6 to 400 m (199 to 1312 ft)"`` (or one value); bounds ``">"``/``"<"``/``""``."""
-    from skidmc.scene.units import from_si
-
-    if not all(math.isfinite(v) for v in values):
-        return "-"
-    m = " to ".join(f"{b}{_num(v)}" for v, b in zip(values, bounds))
-    ft = " to ".join(f"{b}{_num(from_si(v, 'm', 'ft'))}" for v, b in zip(values, bounds))
-    return f"{m} m ({ft} ft)"
-
-
-def _scene_summary_lines(path) -> list[str]:
-    """One line per scene: median and 5-95 % range of the critical height, censored and failed
-    counts (:func:`skidmc.ensemble.storage.summarize_file`)."""
-    from skidmc.ensemble.storage import summarize_file
-
-    summaries = summarize_file(path)
-    width = max(len(s.scene) for s in summaries)
-    lines = ["critical height per scene:"]
-    for s in summaries:
-        todo = "" if s.written == s.samples else f" ({s.samples - s.written} not computed yet)"
-        lines.append(
-            f"  {s.scene:<{width}}  median {_heights([s.median], [s.median_bound])}, "
-            f"5-95 %: {_heights([s.p05, s.p95], s.range_bound)}; "
-            f"censored {s.censored_above} above, {s.censored_below} below; "
-            f"failed {s.failed} of {s.written}{todo}")
-    return lines
-
-
-def _hazard_study(args: argparse.Namespace) -> int | None:
-    """A hazard study (``[hazard]`` table): the probability per handling accident (exit
-    status), or None for any other file."""
-    from pathlib import Path
-
-    from skidmc.ensemble.hazard_study import is_hazard_study, load_hazard_study
-
-    if not Path(args.study).is_file() or not is_hazard_study(args.study):
-        return None
-    from skidmc.analysis.handling import run_hazard_study
-
-    try:
-        study = load_hazard_study(args.study)
-        out = Path(args.out) if args.out else Path("results") / study.name
-        result = run_hazard_study(
-            study, out, workers=args.workers,
-            progress=None if args.quiet else (lambda line: print(line, file=sys.stderr)))
-    except SkidmcError as exc:
-        print(f"skidmc run: error: {exc}", file=sys.stderr)
-        return 2
-    low, high = result.interval
-    print(f"skidmc run: P(reaction per accident) = {result.probability:.3g} "
-          f"[{low:.3g}, {high:.3g}] (95 %), {result.runs} solver runs; {out / 'summary.md'}",
-          file=sys.stderr)
-    print(out / "summary.md")
-    return 0
-
-
-def _growing_study(args: argparse.Namespace) -> int | None:
-    """A saltelli study with ``n_max``: grow N until its Sobol' indices are stable (exit
-    status), or None for any other study (including one that does not load: the run reports
-    it)."""
-    from skidmc.ensemble.study import load_study
-
-    try:
-        study = load_study(args.study)
-    except SkidmcError:
-        return None
-    if not study.design.n_max or args.n is not None:
-        return None
-    from skidmc.analysis.sobol_study import run_until_stable
-    from skidmc.ensemble.run import RunInterrupted
-
-    try:
-        steps = run_until_stable(study, args.out, workers=args.workers,
-                                 progress=False if args.quiet else None,
-                                 solver=getattr(args, "solver", None),
-                                 force=bool(getattr(args, "force", False)),
-                                 log=lambda line: print(f"skidmc run: {line}", file=sys.stderr))
-    except RunInterrupted as exc:
-        print(f"skidmc run: interrupted; {exc.hint}", file=sys.stderr)
-        return 130
-    except SkidmcError as exc:
-        print(f"skidmc run: error: {exc}", file=sys.stderr)
-        return 2
-    stable = all(steps[-1]["stable"].values())
-    print(f"skidmc run: N = {steps[-1]['n']}: Sobol' indices "
-          f"{'stable' if stable else 'NOT stable (n_max reached)'}", file=sys.stderr)
-    return 0
+def _finish(name: str, outcome) -> int:
+    """Print a kind's :class:`~skidmc.workflows.registry.Outcome`; its exit status."""
+    for line in outcome.lines:
+        print(line, file=sys.stderr)
+    for line in outcome.printed:
+        print(line)
+    if outcome.path is not None and outcome.status == 0:
+        print(outcome.path)
+    return outcome.status
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     """``skidmc run``: exit status 0 done (or up to date), 2 invalid study, option or result
-    file, 130 interrupted."""
-    from skidmc.ensemble.run import RunInterrupted, execute_study
+    file, 130 interrupted. The kind of study is looked up (:mod:`skidmc.workflows`)."""
+    from skidmc.ensemble.executors import default_workers
+    from skidmc.ensemble.run import RunInterrupted
+    from skidmc.workflows import RunOptions, check_options, get_kind, load
 
     parts = ["skidmc run", str(args.study)]
     for name in ("out", "n", "workers", "scheduler"):
         if getattr(args, name, None) is not None:
             parts.append(f"--{name} {getattr(args, name)}")
-    parts += ["--resume"] * bool(args.resume) + ["--force"] * bool(getattr(args, "force", False))
-    cpus = _cpus()
+    parts += ["--resume"] * bool(args.resume) + ["--force"] * bool(args.force)
+    cpus = default_workers()
     if args.workers is not None and args.workers > WORKERS_PER_CPU_WARNING * cpus:
         print(f"skidmc run: warning: --workers {args.workers} is far above the {cpus} CPUs "
               "available; running anyway, but the workers will share the CPUs (no faster than "
               f"--workers {cpus}) and each holds its own memory", file=sys.stderr)
-    growth = _growing_study(args)
-    if growth is not None:
-        return growth
-    hazard = _hazard_study(args)
-    if hazard is not None:
-        return hazard
+    options = RunOptions(
+        out=args.out, n=args.n, resume=args.resume, force=args.force, workers=args.workers,
+        scheduler=args.scheduler, quiet=args.quiet, chunk_size=args.chunk_size,
+        command=" ".join(parts), solver=args.solver, study_path=str(args.study))
     try:
-        report = execute_study(
-            args.study, args.out, n=args.n, workers=args.workers, scheduler=args.scheduler,
-            resume=args.resume, force=getattr(args, "force", False),
-            progress=False if args.quiet else None,
-            chunk_size=getattr(args, "chunk_size", None), command=" ".join(parts),
-            solver=getattr(args, "solver", None))
-        lines = []
-        if not args.quiet:
-            if report.action == "up_to_date":
-                lines.append(f"{report.path}: up to date (a complete run of this study, n = "
-                             f"{report.n_rows}, completed {report.completed or '?'}); nothing "
-                             "computed (--force recomputes it)")
-            else:
-                lines.append(f"{report.path}: {report.summary()}")
-            lines += _scene_summary_lines(report.path)
-            failed = report.status_counts.get("failed", 0)
-            if failed:
-                lines.append(f"skidmc run: {failed} samples failed; see failure_reason in the "
-                             "file")
-    except SkidmcError as exc:  # StudyError, StorageError, SchedulerError: a message
+        kind, study = load(args.study)
+        check_options(kind, options)
+        outcome = get_kind(kind).run(study, options)
+    except SkidmcError as exc:  # StudyError, OptionError, StorageError, SchedulerError
         print(f"skidmc run: error: {exc}", file=sys.stderr)
         return 2
     except RunInterrupted as exc:
@@ -443,10 +336,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"skidmc run: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
-    for line in lines:
-        print(line, file=sys.stderr)
-    print(report.path)
-    return 0
+    return _finish(kind, outcome)
 
 
 # --- skidmc report ------------------------------------------------------------------------------
@@ -461,8 +351,8 @@ def _add_report_parser(subparsers) -> None:
     )
     report.add_argument("target", help="result file (.h5) or study file (.toml)")
     report.add_argument("--out", help="folder for the report (default: the result file's)")
-    report.add_argument("--confidence", type=_unit_interval, default=0.95,
-                        help="coverage of every interval and band (default: %(default)g)")
+    report.add_argument("--confidence", type=_unit_interval,
+                        help="coverage of every interval and band (default: 0.95)")
     report.set_defaults(func=_cmd_report)
 
 
@@ -477,61 +367,20 @@ def _unit_interval(text: str) -> float:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    """``skidmc report``: exit status 0 written, 2 no usable result."""
+    """``skidmc report``: exit status 0 written, 2 no usable result. The kind of study (of the
+    study file, or of the study a result file stores) is looked up (:mod:`skidmc.workflows`)."""
     from pathlib import Path
 
-    from skidmc.analysis import open_ensemble
-    from skidmc.analysis.report import write_report
+    from skidmc.workflows import ReportOptions, check_options, get_kind, kind_of_result, load
 
     target = Path(args.target)
-    if target.suffix == ".toml" and target.is_file():
-        from skidmc.ensemble.hazard_study import is_hazard_study, load_hazard_study
-
-        if is_hazard_study(target):
-            summary = Path("results") / load_hazard_study(target).name / "summary.md"
-            if not summary.is_file():
-                print(f"skidmc report: error: {target}: no result yet at {summary}; run it "
-                      f"first: skidmc run {target}", file=sys.stderr)
-                return 2
-            print(summary.read_text(), end="")  # written by the run itself
-            print(summary)
-            return 0
+    options = ReportOptions(out=args.out, confidence=args.confidence, source=str(args.target))
     if target.suffix == ".toml":
-        from skidmc.ensemble.storage import default_path
-        from skidmc.ensemble.study import load_study
-
-        study = load_study(target)
-        path = default_path(study)
-        if not path.is_file():
-            print(f"skidmc report: error: {target}: no result yet at {path}; run it first: "
-                  f"skidmc run {target}", file=sys.stderr)
-            return 2
+        kind, subject = load(target)
     else:
-        path = target
-    ds = open_ensemble(path)
-    if ds.attrs["unfinished"]:
-        print(f"skidmc report: warning: {path}: {ds.attrs['unfinished']} samples unfinished; "
-              "the report uses the finished ones (finish with skidmc run --resume)",
-              file=sys.stderr)
-    out = Path(args.out) if args.out else path.parent
-    result = write_report(ds, out, source=str(args.target), confidence=args.confidence)
-    for a in result["analyses"]:
-        if a.fit is None:
-            print(f"{a.scene}: too few exact critical heights for a fit")
-            continue
-        est, low, high = a.predicted_h50()
-        band = ("epistemic 5-95 %" if a.epistemic is not None
-                else f"{args.confidence:.0%} interval")
-        line = (f"{a.scene}: H50 {est:.3g} ft ({band} {low:.3g} to {high:.3g}), sigma ln H "
-                f"{a.fit.sigma:.2f}; {a.fit.verdict}")
-        if a.experiment is not None:
-            e = a.experimental_h50()
-            shown = (f"> {e[1]:.3g}" if a.experiment.h50_qualifier == "lower_bound"
-                     else f"{e[0]:.3g} [{e[1]:.3g}, {e[2]:.3g}]")
-            line += f"; experiment {a.experiment.name}: {shown} ft"
-        print(line)
-    print(out / "summary.md")
-    return 0
+        kind, subject = kind_of_result(target), target
+    check_options(kind, options)
+    return _finish(kind, get_kind(kind).report(subject, options))
 
 
 # --- parser and entry point ----------------------------------------------------------------------

@@ -117,7 +117,8 @@ def resolve_solver(solver: Callable | None) -> Callable:
 
 
 def solver_kwargs(solver_options) -> dict:
-    """SolverOptions or mapping -> plain keyword arguments (picklable without skidmc.study)."""
+    """SolverOptions or mapping -> plain keyword arguments (picklable without
+    skidmc.ensemble.study)."""
     if hasattr(solver_options, "as_kwargs"):  # a SolverOptions
         return dict(solver_options.as_kwargs())
     return dict(solver_options or {})

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import atexit
 import concurrent.futures as cf
+import concurrent.futures.process  # noqa: F401  (cf.process: BrokenProcessPool; not loaded by cf)
 import dataclasses
 import math
 import multiprocessing
@@ -353,6 +354,8 @@ class DaskExecutor:
 
 
 def default_workers() -> int:
+    """The CPUs this process may run on (its affinity mask where the OS has one) [1]: the
+    default worker count, and what ``skidmc run`` compares ``--workers`` with."""
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux

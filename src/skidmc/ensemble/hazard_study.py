@@ -4,7 +4,7 @@ A hazard study asks how likely one handling accident is to end in a reaction. It
 population of accidents rather than one experiment: how high the billet falls, at what angle it
 strikes, which surface it strikes (a mixture of materials from the registry, each with its own
 friction), the billet population, and what is not known about the kinetics. It is run by
-:func:`skidmc.analysis.handling.run_hazard_study`. The format (all under one ``[hazard]``
+:func:`skidmc.workflows.hazard.run_hazard_study`. The format (all under one ``[hazard]``
 table, so that a file is recognised by it; :func:`is_hazard_study`)::
 
     [hazard]

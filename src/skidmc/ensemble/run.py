@@ -431,7 +431,12 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                 raise RunInterrupted(_interrupted_hint(path, file.path, action, done,
                                                        study.n_rows, removed)) from None
             raise
+        complete = file.complete
         file.close()
+        if complete:
+            from skidmc.ensemble.storage import compact_file
+
+            compact_file(file.path)  # never written again: the compact layout
         if action == "replace":
             os.replace(file.path, path)  # the old file is replaced only by a complete one
     except KeyboardInterrupt as exc:

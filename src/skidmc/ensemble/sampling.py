@@ -20,8 +20,11 @@ copula of the study's correlations (normal scores z = Phi^-1(u) mixed by the Cho
 the correlation matrix, back through Phi), truncation to [U_TAIL, 1 - U_TAIL] (the quantiles the
 study checked against the physical range), and each distribution's ``ppf`` (times the scene's
 nominal value for relative distributions). A sampled rate at the reference temperature gives the
-prefactor Z = k_ref exp(E/R / T_ref) with the sample's own E/R. Every step acts row by row, with
-no reduction across rows, so a row's inputs do not depend on which other rows share its batch.
+prefactor Z = k_ref exp(E/R / T_ref) with the sample's own E/R. A key uncertain at two levels
+(:attr:`skidmc.ensemble.study_model.StudyScene.factors`) is its epistemic value (or nominal
+value) times its aleatory factor, drawn in the factor's own design column. Every step acts row
+by row, with no reduction across rows, so a row's inputs do not depend on which other rows share
+its batch.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from scipy.special import ndtr, ndtri
 from scipy.stats import qmc
 
 from skidmc.ensemble.study import RATE_AT_REFERENCE, U_TAIL, Study
-from skidmc.ensemble.study_model import prefactor_from_rate
+from skidmc.ensemble.study_model import aleatory_factor_column, prefactor_from_rate
 
 __all__ = [
     "MC_BLOCK",
@@ -325,6 +328,10 @@ def transform(study: Study, u: np.ndarray) -> list[dict[str, np.ndarray]]:
     for sc in study.scenes:
         values = {key: dist.ppf(u[:, study.keys.index(key)], sc.nominal(key))
                   for key, dist in sc.uncertain.items()}
+        for key, factor in sc.factors.items():  # a key uncertain at two levels: level x factor
+            level = values[key] if key in values else sc.nominal(key)
+            values[key] = level * factor.frozen.ppf(u[:, study.keys.index(
+                aleatory_factor_column(key))])
         if RATE_AT_REFERENCE in values:
             t_act = values.get("kinetics.activation_temperature",
                                sc.nominal("kinetics.activation_temperature"))

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import enum
 import errno
 import math
 import os
@@ -51,28 +52,49 @@ import h5netcdf
 import h5py
 import numpy as np
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python 3.10: the same parser, packaged as tomli
+    import tomli as tomllib
+
 from skidmc.ensemble.study import EXTRA_KEYS, RATE_AT_REFERENCE, Study
 from skidmc.errors import SkidmcError
 from skidmc.scene import DESCRIPTIONS, NUMERIC_KEYS, SI_UNITS
 
 __all__ = [
     "CHUNK_BYTES",
+    "EVALUATIONS_FORMAT",
     "FORMAT",
+    "FORMATS",
     "PAGE_BYTES",
+    "EnsembleAttrs",
     "EnsembleFile",
+    "EvaluationLog",
+    "LoggedCall",
     "SceneSummary",
+    "compact_file",
+    "Status",
     "StorageError",
     "VariableSpec",
     "default_path",
     "ensemble_variables",
     "inspect_file",
+    "open_ensemble",
     "summarize_file",
     "timestamp",
     "verify_file",
 ]
 
 #: Value of the ``skidmc_format`` attribute that marks an ensemble file (and its version).
-FORMAT = "skidmc-ensemble 1"
+#: Version 2: a complete file is compacted (:func:`compact_file`); version 1 files (never
+#: compacted) are still read and resumed.
+FORMAT = "skidmc-ensemble 2"
+
+#: Every ensemble format this module reads.
+FORMATS = ("skidmc-ensemble 1", FORMAT)
+
+#: Samples per HDF5 chunk of a compacted file (compressed chunks, read whole).
+COMPACT_CHUNK = 1 << 15
 
 #: Values of ``status``.
 STATUSES = ("ok", "censored_above", "censored_below", "failed")
@@ -160,12 +182,13 @@ def ensemble_variables(study: Study) -> tuple[VariableSpec, ...]:
     """Per-sample variables of a study's file: every numeric scene key, extras, outputs."""
     out = [VariableSpec(k, "f8", SI_UNITS[k], DESCRIPTIONS[k]) for k in NUMERIC_KEYS]
     for key, (unit, long_name) in EXTRA_KEYS.items():
-        if any(key in sc.uncertain for sc in study.scenes):
+        dists = [sc.uncertain.get(key) or sc.factors.get(key) for sc in study.scenes]
+        if any(dists):
             attrs = {}
             if key == RATE_AT_REFERENCE:
                 attrs = {"reference_temperature": np.array(
-                    [sc.uncertain[key].reference_temperature if key in sc.uncertain else np.nan
-                     for sc in study.scenes]), "reference_temperature_units": "K"}
+                    [d.reference_temperature if d else np.nan for d in dists]),
+                    "reference_temperature_units": "K"}
             out.append(VariableSpec(key, "f8", unit, long_name, attrs=attrs))
     return (*out, *OUTPUTS)
 
@@ -328,7 +351,7 @@ def inspect_file(path: str | os.PathLike, *, verify: bool = False) -> dict:
     with _open(path, "r") as f:
         try:
             attrs = dict(f.attrs)
-            if attrs.get("skidmc_format") != FORMAT or "done" not in f:
+            if attrs.get("skidmc_format") not in FORMATS or "done" not in f:
                 return {"skidmc": False, "format": attrs.get("skidmc_format")}
             done = f["done"][:]
         except (OSError, KeyError, RuntimeError, ValueError) as exc:
@@ -345,6 +368,7 @@ def inspect_file(path: str | os.PathLike, *, verify: bool = False) -> dict:
         "study_sha256": attrs.get("study_sha256"),
         "history": attrs.get("history", ""),
         "completed": attrs.get("completed", ""),
+        "compact": bool(attrs.get("compact", 0)),
     }
 
 
@@ -435,6 +459,9 @@ class EnsembleFile:
             raise StorageError(
                 path, f"holds {info['n_rows']} samples per scene, this run asks for "
                 f"{study.n_rows} (a different --n?); resume with the same n or use another --out")
+        if info["compact"]:
+            raise StorageError(path, "is a complete, compacted result: nothing to resume "
+                               "(skidmc run --force recomputes it)")
         f = _open(path, "r+")
         out = cls(path, f, study)
         if history:
@@ -615,6 +642,100 @@ def _global_attrs(study: Study, history: str) -> dict:
 
 
 @dataclasses.dataclass(frozen=True)
+class EnsembleAttrs:
+    """The global attributes of an ensemble file, decoded (written by :func:`_global_attrs`).
+
+    The one place that reads them back: numpy scalars become Python numbers, lists stored as
+    arrays become tuples of str. :func:`open_ensemble` hands them on as
+    ``attrs["design"]`` and ``attrs["solver"]`` (dicts, see there).
+
+    Attributes
+    ----------
+    skidmc_format, skidmc_version : str
+    study_name, study_sha256, study_file, study_text : str
+    design_method : str
+    design_n, design_n_epistemic, seed : int
+    design_keys, design_kinds : tuple of str
+        The design columns and how each is drawn (aleatory, epistemic).
+    saltelli_second_order : bool
+    solver_rtol, solver_h_min, solver_h_max : float
+        [1], [m], [m].
+    solver_tier : str
+    complete : bool
+    created, completed, history : str
+    """
+
+    skidmc_format: str
+    skidmc_version: str
+    study_name: str
+    study_sha256: str
+    study_file: str
+    study_text: str
+    design_method: str
+    design_n: int
+    design_n_epistemic: int
+    seed: int
+    design_keys: tuple[str, ...]
+    design_kinds: tuple[str, ...]
+    saltelli_second_order: bool
+    solver_rtol: float
+    solver_tier: str
+    solver_h_min: float
+    solver_h_max: float
+    complete: bool
+    created: str
+    completed: str
+    history: str
+
+    @classmethod
+    def read(cls, attrs: Mapping) -> EnsembleAttrs:
+        """Decode a file's global attributes (missing ones: empty or zero)."""
+        def scalar(key, default=None):
+            value = attrs.get(key, default)
+            if isinstance(value, np.ndarray) and value.size == 1:
+                value = value.reshape(())[()]
+            return value.item() if isinstance(value, np.generic) else value
+
+        def words(key):
+            value = attrs.get(key, [])
+            return tuple(str(k) for k in np.atleast_1d(value)) if np.size(value) else ()
+
+        return cls(
+            skidmc_format=str(scalar("skidmc_format", "")),
+            skidmc_version=str(scalar("skidmc_version", "")),
+            study_name=str(scalar("study_name", "")),
+            study_sha256=str(scalar("study_sha256", "")),
+            study_file=str(scalar("study_file", "")),
+            study_text=str(scalar("study_text", "")),
+            design_method=str(scalar("design_method", "")),
+            design_n=int(scalar("design_n", 0) or 0),
+            design_n_epistemic=int(scalar("design_n_epistemic", 0) or 0),
+            seed=int(scalar("seed", 0) or 0),
+            design_keys=words("design_keys"), design_kinds=words("design_kinds"),
+            saltelli_second_order=bool(scalar("saltelli_second_order", 0)),
+            solver_rtol=float(scalar("solver_rtol", math.nan)),
+            solver_tier=str(scalar("solver_tier", "")),
+            solver_h_min=float(scalar("solver_h_min", math.nan)),
+            solver_h_max=float(scalar("solver_h_max", math.nan)),
+            complete=bool(scalar("complete", 0)),
+            created=str(scalar("created", "")), completed=str(scalar("completed", "")),
+            history=str(scalar("history", "")))
+
+    @property
+    def design(self) -> dict:
+        """``{"method", "n", "seed", "keys", "second_order", "n_epistemic", "kinds"}``."""
+        return {"method": self.design_method, "n": self.design_n, "seed": self.seed,
+                "keys": list(self.design_keys), "second_order": self.saltelli_second_order,
+                "n_epistemic": self.design_n_epistemic, "kinds": list(self.design_kinds)}
+
+    @property
+    def solver(self) -> dict:
+        """``{"rtol", "tier", "h_min", "h_max"}`` ([1], -, [m], [m])."""
+        return {"rtol": self.solver_rtol, "tier": self.solver_tier, "h_min": self.solver_h_min,
+                "h_max": self.solver_h_max}
+
+
+@dataclasses.dataclass(frozen=True)
 class SceneSummary:
     """The critical heights of one scene of an ensemble file, in a few numbers.
 
@@ -659,6 +780,147 @@ def _decode_chars(chars: np.ndarray) -> np.ndarray:
     return np.char.decode(joined, "utf-8")
 
 
+def _status_words(raw: np.ndarray) -> np.ndarray:
+    """Status as words from either layout: fixed-width chars (appendable) or codes (compact)."""
+    if raw.dtype == "S1":
+        return _decode_chars(raw)
+    return np.array([s.word for s in Status], dtype=object)[raw.astype(np.intp)]
+
+
+def _table_attrs(values: np.ndarray, none: str) -> tuple[np.ndarray, dict]:
+    """Text values -> (uint16 index, CF flag_values / flag_meanings of the distinct values);
+    ``""`` is value 0, meaning `none`."""
+    meanings = ["", *sorted(set(values.ravel().tolist()) - {""})]
+    rank = {m: i for i, m in enumerate(meanings)}
+    index = np.array([rank[v] for v in values.ravel().tolist()],
+                     dtype=np.uint16).reshape(values.shape)
+    return index, {"flag_values": np.arange(len(meanings), dtype=np.uint16),
+                   "flag_meanings": " ".join(m.replace(" ", "_") or none for m in meanings)}
+
+
+def compact_file(path: str | os.PathLike) -> None:
+    """Rewrite a complete ensemble file compactly, in place (atomically: built aside, renamed).
+
+    While a run writes, the file keeps the appendable layout of the module docstring (fixed-size
+    page chunks rewritten in place, fixed-width text). Once complete it is never written again,
+    so it is rewritten: ``status`` as :class:`Status` codes and ``flags`` as indices of their
+    distinct combinations (both CF ``flag_values`` / ``flag_meanings``), ``failure_reason`` as
+    an index (-1: none) into a ``failure_reasons`` table, every input that does not vary within
+    a scene once per scene (attribute ``constant_along = "sample"``), and every variable in
+    chunks of :data:`COMPACT_CHUNK` samples, compressed (HDF5's shuffle + gzip, which h5py,
+    h5netcdf and netCDF read without plugins) and checksummed (Fletcher-32).
+    :func:`open_ensemble` gives back the same Dataset as for the appendable layout.
+    """
+    path = Path(path)
+    verify_file(path)
+    tmp = path.with_name(path.name + ".compact")
+    with _open(path, "r") as src:
+        attrs = dict(src.attrs)
+        if attrs.get("compact"):
+            return
+        multi = "scene" in src
+        n = int(src["done"].shape[0])
+        n_scenes = int(src["scene"].shape[0]) if multi else 0
+        variables = {name: (obj[...], dict(obj.attrs)) for name, obj in src.items()
+                     if isinstance(obj, h5py.Dataset) and not name.startswith("strlen")}
+    lead = ("scene", "sample") if multi else ("sample",)
+    inputs = {*NUMERIC_KEYS, *EXTRA_KEYS}
+
+    def opts(shape) -> dict:
+        if not shape or shape[-1] == 0:
+            return {}
+        chunks = (*(1,) * (len(shape) - 1), min(shape[-1], COMPACT_CHUNK))
+        return {"chunks": chunks, "compression": "gzip", "shuffle": True, "fletcher32": True}
+
+    clean = {k: v for k, v in attrs.items() if k not in ("_NCProperties",)}
+    clean.update({"skidmc_format": FORMAT, "compact": np.int8(1)})
+    with h5netcdf.File(tmp, "w") as f:
+        f.dimensions = {"sample": n, **({"scene": n_scenes} if multi else {})}
+        f.attrs.update(clean)
+        for name, (data, vattrs) in variables.items():
+            vattrs = {k: v for k, v in vattrs.items()
+                      if k not in ("DIMENSION_LIST", "REFERENCE_LIST", "CLASS", "NAME",
+                                   "_Netcdf4Dimid", "_Netcdf4Coordinates", "_Encoding",
+                                   "_FillValue")}
+            if name in ("sample", "done"):
+                dims = ("sample",)
+            elif name == "scene":
+                dims = ("scene",)
+            elif name == "configuration":
+                dims = lead[:-1]
+            else:
+                dims = lead
+            if data.dtype == "S1":  # fixed-width text of the appendable layout
+                text = _decode_chars(data).astype(object)
+                if name == "status":
+                    data = Status.codes(text).reshape(text.shape)
+                    vattrs.update(Status.flag_attrs())
+                elif name == "failure_reason":
+                    reasons = sorted(set(text.ravel().tolist()) - {""})
+                    rank = {r: i for i, r in enumerate(reasons)}
+                    data = np.array([rank.get(r, -1) for r in text.ravel().tolist()],
+                                    dtype=np.int32).reshape(text.shape)
+                    f.dimensions["reason"] = len(reasons)
+                    table = f.create_variable("failure_reasons", ("reason",),
+                                              dtype=h5py.string_dtype())
+                    if reasons:
+                        table[:] = np.array(reasons, dtype=object)
+                    table.attrs.update({"units": "-", "long_name": "distinct failure reasons"})
+                    vattrs["comment"] = "index into failure_reasons; -1: none"
+                else:  # flags
+                    data, flag = _table_attrs(text, "none")
+                    vattrs.update(flag)
+            elif name in inputs and data.ndim == len(lead) and n and np.array_equal(
+                    data, np.broadcast_to(data[..., :1], data.shape), equal_nan=True):
+                data = data[..., 0]
+                dims = dims[:-1]
+                vattrs["constant_along"] = "sample"
+            if data.dtype.kind in "OU":
+                v = f.create_variable(name, dims, dtype=h5py.string_dtype())
+                v[...] = np.asarray(data, dtype=object)
+            else:
+                kw = opts(data.shape) if dims and dims[-1] == "sample" else {}
+                fill = {"fillvalue": np.nan} if data.dtype.kind == "f" else {}
+                v = f.create_variable(name, dims, dtype=data.dtype, data=data, **kw, **fill)
+            v.attrs.update(vattrs)
+    os.replace(tmp, path)
+
+
+def _decode_compact(ds):
+    """The Dataset of a compacted file as that of the appendable layout (words, text, inputs
+    per sample)."""
+    import xarray as xr
+
+    out = {}
+    words = np.array([s.word for s in Status], dtype=object)
+    if "status" in ds and ds["status"].dtype.kind in "iu":
+        out["status"] = ds["status"].copy(data=words[ds["status"].values.astype(np.intp)])
+        for k in ("flag_values", "flag_meanings"):
+            out["status"].attrs.pop(k, None)
+        out["status"].attrs["flag_meanings"] = " ".join(STATUSES)
+    if "flags" in ds and ds["flags"].dtype.kind in "iu":
+        meanings = str(ds["flags"].attrs.get("flag_meanings", "")).split(" ")
+        table = np.array(["" if i == 0 else m for i, m in enumerate(meanings)], dtype=object)
+        out["flags"] = ds["flags"].copy(data=table[ds["flags"].values.astype(np.intp)])
+        for k in ("flag_values", "flag_meanings"):
+            out["flags"].attrs.pop(k, None)
+    if "failure_reason" in ds and ds["failure_reason"].dtype.kind in "iu":
+        reasons = np.array([*(str(r) for r in np.atleast_1d(ds["failure_reasons"].values)),
+                            ""], dtype=object)
+        out["failure_reason"] = ds["failure_reason"].copy(
+            data=reasons[ds["failure_reason"].values.astype(np.intp)])
+        out["failure_reason"].attrs.pop("comment", None)
+    shape = ds["critical_height"]
+    for name, var in ds.data_vars.items():
+        if var.attrs.get("constant_along") == "sample":
+            full = xr.DataArray(np.broadcast_to(var.values[..., None], shape.shape).copy(),
+                                dims=shape.dims, attrs={k: v for k, v in var.attrs.items()
+                                                        if k != "constant_along"})
+            out[name] = full
+    ds = ds.drop_vars([v for v in ("failure_reasons",) if v in ds])
+    return ds.assign(out)
+
+
 def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
     """Per-scene summary of an ensemble file's critical heights (see :class:`SceneSummary`).
 
@@ -673,15 +935,15 @@ def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
             attrs = dict(f.attrs)
             done = f["done"][:].astype(bool)
             heights = np.atleast_2d(f["critical_height"][...])
-            status = _decode_chars(f["status"][...])
+            status = _status_words(f["status"][...])
             names = ([s.decode() if isinstance(s, bytes) else str(s) for s in f["scene"][...]]
                      if "scene" in f else [str(attrs.get("study_name", ""))])
         except (OSError, KeyError, RuntimeError, ValueError) as exc:
             raise StorageError(path, f"is damaged: its results cannot be read ({exc}); "
                                f"{_DAMAGED_HINT}", damaged=True) from None
     status = np.atleast_2d(status)
-    h_min, h_max = (float(np.ravel(attrs.get(k, np.nan))[0])
-                    for k in ("solver_h_min", "solver_h_max"))
+    meta = EnsembleAttrs.read(attrs)
+    h_min, h_max = meta.solver_h_min, meta.solver_h_max
     out = []
     for name, h, st in zip(names, heights, status):
         h, st = h[done], st[done]
@@ -705,3 +967,342 @@ def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
             failed=counts["failed"], median=float(median), p05=float(p05), p95=float(p95),
             median_bound=bound(median), range_bound=(bound(p05), bound(p95))))
     return out
+
+
+# --- reading -------------------------------------------------------------------------------------
+
+
+def open_ensemble(path: str | os.PathLike):
+    """An ensemble file as an xarray Dataset in memory, unfinished samples masked.
+
+    The file is verified first (every variable read once: HDF5's checksums), then loaded into
+    memory and closed: the Dataset does not hold the file open, so a run may continue it
+    (``skidmc run --resume``) while the Dataset is in use; an analysis of a large file pays its
+    memory (about the file's size) for that.
+
+    Parameters
+    ----------
+    path : path
+        A result file of ``skidmc run``.
+
+    Returns
+    -------
+    xarray.Dataset
+        The file's variables and attributes, with:
+
+        - every per-sample variable (inputs and outputs) masked where ``done`` is 0 (samples
+          not computed yet, or a chunk interrupted before its done flags): NaN for numbers
+          (``evaluations`` becomes float then; a complete run keeps its integers), ``""`` for
+          text; ``done`` itself as bool;
+        - ``attrs["unfinished"]``: the number of such samples (0 for a complete run);
+        - ``attrs["study"]``: the study file's text parsed back (a dict, as TOML reads it),
+          ``attrs["solver"]``: ``{"rtol", "tier", "h_min", "h_max"}``, ``attrs["design"]``:
+          ``{"method", "n", "seed", "keys", "second_order", "n_epistemic", "kinds"}`` (besides the
+          flat attributes the
+          file stores: ``solver_rtol``, ``seed``, ...). These three are dicts, which netCDF
+          cannot store: drop them before ``Dataset.to_netcdf``.
+
+    Raises
+    ------
+    skidmc.ensemble.storage.StorageError
+        Not an HDF5 file, not a skidmc ensemble file, or damaged (``damaged=True``: truncated,
+        or data failing their checksums).
+    """
+    import numpy as np
+    import xarray as xr
+
+    path = Path(path)
+    if not path.is_file():
+        raise StorageError(path, "does not exist (or is not a file)")
+    info = inspect_file(path, verify=True)
+    if not info["skidmc"]:
+        raise StorageError(path, "is an HDF5 file but not a skidmc ensemble file (no "
+                           "skidmc_format attribute or no done flags)")
+    try:
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            ds = ds.load()
+    except (OSError, ValueError, KeyError) as exc:
+        raise StorageError(path, f"is damaged: xarray cannot read it ({exc})",
+                           damaged=True) from None
+
+    if ds.attrs.get("compact"):
+        ds = _decode_compact(ds)
+    done = ds["done"].values.astype(bool)
+    masked = {}
+    for name, var in ds.data_vars.items():
+        if name == "done" or "sample" not in var.dims or done.all():
+            continue
+        keep = xr.DataArray(done, dims=("sample",))
+        if var.dtype.kind in "OUS":
+            masked[name] = var.where(keep, "")
+        else:
+            masked[name] = var.astype(float).where(keep)  # NaN where not done
+        masked[name].attrs = var.attrs
+    ds = ds.assign(masked)
+    ds["done"] = ds["done"].astype(bool)
+
+    attrs = ds.attrs
+    text = str(attrs.get("study_text", ""))
+    try:
+        study = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise StorageError(path, f"is damaged: its study text is not valid TOML ({exc})",
+                           damaged=True) from None
+
+    meta = EnsembleAttrs.read(attrs)
+    attrs["unfinished"] = int(np.count_nonzero(~done))
+    attrs["study"] = study
+    attrs["solver"] = meta.solver
+    attrs["design"] = meta.design
+    n_epistemic = attrs["design"]["n_epistemic"]
+    if n_epistemic:
+        ds = _unnest(ds, n_epistemic)
+    return ds
+
+
+def _unnest(ds, n_epistemic: int):
+    """Split the flat ``sample`` dim of a nested design into ``epistemic`` x ``sample``."""
+    import numpy as np
+    import xarray as xr
+
+    n_aleatory = ds.sizes["sample"] // n_epistemic
+    out = {}
+    for name, var in ds.data_vars.items():
+        if "sample" not in var.dims:
+            out[name] = var
+            continue
+        axis = var.dims.index("sample")
+        shape = var.shape[:axis] + (n_epistemic, n_aleatory) + var.shape[axis + 1:]
+        dims = var.dims[:axis] + ("epistemic", "sample") + var.dims[axis + 1:]
+        out[name] = xr.DataArray(var.values.reshape(shape), dims=dims, attrs=var.attrs)
+    coords = {k: v for k, v in ds.coords.items() if "sample" not in v.dims}
+    coords.update(epistemic=np.arange(n_epistemic), sample=np.arange(n_aleatory))
+    return xr.Dataset(out, coords=coords, attrs=ds.attrs)
+
+
+# --- the solver calls of an adaptive study --------------------------------------------------------
+
+
+#: Value of the ``skidmc_format`` attribute of an evaluation log (:class:`EvaluationLog`).
+EVALUATIONS_FORMAT = "skidmc-evaluations 1"
+
+
+class Status(enum.IntEnum):
+    """A solver outcome as a small integer (CF ``flag_values`` / ``flag_meanings``)."""
+
+    NOT_RUN = 0
+    OK = 1
+    CENSORED_ABOVE = 2
+    CENSORED_BELOW = 3
+    FAILED = 4
+
+    @property
+    def word(self) -> str:
+        """The status word of ensemble files and :class:`~skidmc.ensemble.evaluate.BatchResult`
+        (``""`` for NOT_RUN)."""
+        return "" if self is Status.NOT_RUN else self.name.lower()
+
+    @classmethod
+    def codes(cls, words) -> np.ndarray:
+        """Status words -> codes (uint8); anything unknown counts as FAILED."""
+        table = {s.word: int(s) for s in cls}
+        return np.array([table.get(str(w), int(cls.FAILED)) for w in np.ravel(words)],
+                        dtype=np.uint8)
+
+    @classmethod
+    def flag_attrs(cls) -> dict:
+        """CF attributes of a status variable."""
+        return {"flag_values": np.array([int(s) for s in cls], dtype=np.uint8),
+                "flag_meanings": " ".join(s.name.lower() for s in cls)}
+
+
+@dataclasses.dataclass(frozen=True)
+class LoggedCall:
+    """One solver call kept by an :class:`EvaluationLog`.
+
+    Attributes
+    ----------
+    digest : str
+        sha256 of what was asked (inputs, base scene, solver options).
+    critical_height : numpy.ndarray
+        [m], one per scene of the call.
+    status : numpy.ndarray
+        Status words (``ok``, ``censored_above``, ``censored_below``, ``failed``).
+    failure_reason : numpy.ndarray
+        Text, ``""`` where none.
+    """
+
+    digest: str
+    critical_height: np.ndarray
+    status: np.ndarray
+    failure_reason: np.ndarray
+
+
+class EvaluationLog:
+    """The solver calls of an adaptive study, kept so that a run resumes and a report replays.
+
+    An adaptive estimator (the hazard study's importance sampling) decides its next solver call
+    from the previous ones, so its work is a sequence of calls rather than a design of samples.
+    Given its seeds the sequence is deterministic: replaying the kept answers of calls 0..k-1
+    brings the estimator to call k with the same state, and the numbers of a resumed run are
+    those of an uninterrupted one. Each call is checked by the digest of what it asked (inputs,
+    base scene, solver options): a call that asks something else (other code, another study)
+    ends the replay there and is computed.
+
+    Layout. While running, one small HDF5 file per call in ``<path>.calls/`` (written under a
+    temporary name, then renamed: a kill -9 leaves whole calls or none). When the run completes
+    the calls are gathered into one file at `path` (``complete = 1``; every variable
+    compressed with shuffle + gzip and checksummed with Fletcher-32), and the folder removed.
+    Inputs are not stored: the replay recomputes them from the study's seeds and checks them
+    against the digest. Variables (dimension ``row``, all calls one after another): ``call``
+    (the call of each row), ``critical_height`` [m], ``status`` (:class:`Status` codes, CF
+    flags), ``failure_reason`` (index into the ``reasons`` table, -1 for none); per call
+    ``digest``.
+
+    Parameters
+    ----------
+    path : path
+        The gathered file (``evaluations.h5``).
+    attrs : mapping
+        Global attributes (``study_sha256``, ``study_text``, ...); a log whose ``study_sha256``
+        differs is not resumed.
+    """
+
+    def __init__(self, path: str | os.PathLike, attrs: Mapping) -> None:
+        self.path = Path(path)
+        self.folder = self.path.with_name(self.path.name + ".calls")
+        self.attrs = dict(attrs)
+
+    # -- reading
+
+    def info(self) -> dict:
+        """``{"exists", "complete", "study_sha256", "calls"}`` of what is on disk (and
+        ``study_file`` once gathered)."""
+        if self.path.is_file():
+            with _open(self.path, "r") as f:
+                return {"exists": True, "complete": bool(f.attrs.get("complete", 0)),
+                        "study_sha256": str(f.attrs.get("study_sha256", "")),
+                        "study_file": str(f.attrs.get("study_file", "")),
+                        "calls": int(f["digest"].shape[0]) if "digest" in f else 0}
+        calls = sorted(self.folder.glob("*.h5")) if self.folder.is_dir() else []
+        return {"exists": bool(calls), "complete": False,
+                "study_sha256": self._folder_sha(), "calls": len(calls)}
+
+    def _folder_sha(self) -> str:
+        marker = self.folder / "study_sha256"
+        return marker.read_text().strip() if marker.is_file() else ""
+
+    def load(self) -> list[LoggedCall]:
+        """Every kept call, in order (verified: a damaged file raises StorageError)."""
+        if self.path.is_file():
+            verify_file(self.path)
+            with _open(self.path, "r") as f:
+                call = f["call"][:]
+                heights, codes = f["critical_height"][:], f["status"][:]
+                index = f["failure_reason"][:]
+                reasons = np.array([r.decode("utf-8") for r in f["reasons"][:]] + [""],
+                                   dtype=object)
+                digests = [d.decode("ascii") for d in f["digest"][:]]
+            words = np.array([Status(int(c)).word for c in codes], dtype=object)
+            text = reasons[index]  # -1 -> the "" appended
+            return [LoggedCall(d, heights[call == i], words[call == i], text[call == i])
+                    for i, d in enumerate(digests)]
+        out = []
+        for i in range(len(list(self.folder.glob("*.h5"))) if self.folder.is_dir() else 0):
+            part = self.folder / f"{i:06d}.h5"
+            if not part.is_file():
+                break
+            try:
+                verify_file(part)
+                with _open(part, "r") as f:
+                    out.append(LoggedCall(
+                        str(f.attrs["digest"]), f["critical_height"][:],
+                        np.array([Status(int(c)).word for c in f["status"][:]], dtype=object),
+                        np.array([r.decode("utf-8") for r in f["failure_reason"][:]],
+                                 dtype=object)))
+            except (StorageError, KeyError, OSError):
+                break  # a damaged call and those after it are computed again
+        return out
+
+    # -- writing
+
+    def start(self, *, keep: bool) -> None:
+        """Begin a run: keep the calls on disk (resume) or discard them (a new run)."""
+        if not keep:
+            self.discard()
+        if self.path.is_file():  # a complete log being resumed: unpack it into calls
+            calls = self.load()
+            self.path.unlink()
+            self.folder.mkdir(parents=True, exist_ok=True)
+            (self.folder / "study_sha256").write_text(str(self.attrs.get("study_sha256", "")))
+            for i, c in enumerate(calls):
+                self._write_call(i, c)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        (self.folder / "study_sha256").write_text(str(self.attrs.get("study_sha256", "")))
+
+    def discard(self) -> None:
+        """Remove the log (file and folder)."""
+        self.path.unlink(missing_ok=True)
+        if self.folder.is_dir():
+            for p in self.folder.iterdir():
+                p.unlink()
+            self.folder.rmdir()
+
+    def drop_from(self, index: int) -> None:
+        """Forget calls `index`, `index` + 1, ... (they asked something else)."""
+        for p in sorted(self.folder.glob("*.h5")):
+            if int(p.stem) >= index:
+                p.unlink()
+
+    def append(self, index: int, call: LoggedCall) -> None:
+        """Keep call number `index` (crash-safe: written aside, then renamed)."""
+        self._write_call(index, call)
+
+    def _write_call(self, index: int, call: LoggedCall) -> None:
+        final = self.folder / f"{index:06d}.h5"
+        tmp = final.with_suffix(".tmp")
+        with h5py.File(tmp, "w") as f:
+            f.attrs["digest"] = call.digest
+            kw = {"fletcher32": True} if len(call.critical_height) else {}
+            f.create_dataset("critical_height", data=np.asarray(call.critical_height, float), **kw)
+            f.create_dataset("status", data=Status.codes(call.status), **kw)
+            f.create_dataset("failure_reason", data=np.array(
+                [str(r).encode("utf-8") for r in call.failure_reason], dtype=object),
+                dtype=h5py.string_dtype("utf-8"))
+        os.replace(tmp, final)
+
+    def complete(self, calls: list[LoggedCall]) -> None:
+        """Gather `calls` into the one file at `path` (atomically) and remove the folder."""
+        reasons = sorted({str(r) for c in calls for r in c.failure_reason if r})
+        rank = {r: i for i, r in enumerate(reasons)}
+        call = np.concatenate([np.full(len(c.critical_height), i, dtype=np.int32)
+                               for i, c in enumerate(calls)] or [np.zeros(0, np.int32)])
+        heights = np.concatenate([np.asarray(c.critical_height, float) for c in calls]
+                                 or [np.zeros(0)])
+        codes = np.concatenate([Status.codes(c.status) for c in calls]
+                               or [np.zeros(0, np.uint8)])
+        index = np.concatenate([np.array([rank[str(r)] if r else -1 for r in c.failure_reason],
+                                         dtype=np.int32) for c in calls]
+                               or [np.zeros(0, np.int32)])
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        kw = {"shuffle": True, "compression": "gzip", "fletcher32": True} if len(call) else {}
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update({"skidmc_format": EVALUATIONS_FORMAT,
+                            "skidmc_version": _version(), "complete": np.int8(1),
+                            "completed": timestamp(), **self.attrs})
+            f.create_dataset("call", data=call, **kw)
+            f.create_dataset("critical_height", data=heights, **kw).attrs["units"] = "m"
+            f.create_dataset("status", data=codes, **kw).attrs.update(Status.flag_attrs())
+            f.create_dataset("failure_reason", data=index, **kw).attrs["comment"] = (
+                "index into reasons; -1: none")
+            f.create_dataset("reasons", data=np.array([r.encode("utf-8") for r in reasons],
+                                                      dtype=object),
+                             dtype=h5py.string_dtype("utf-8"))
+            f.create_dataset("digest", data=np.array([c.digest.encode("ascii") for c in calls],
+                                                     dtype="S64"))
+        os.replace(tmp, self.path)
+        if self.folder.is_dir():
+            for p in self.folder.iterdir():
+                p.unlink()
+            self.folder.rmdir()

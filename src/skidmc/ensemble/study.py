@@ -7,6 +7,9 @@ run with a :class:`StudyError` naming the file, the key and the value. The forma
     [study]
     name = "paper-quartz-mu"            # results go to results/<name>/ensemble.h5
     description = "..."
+    # kind = "ensemble"                 # or "sobol" (grows N to n_max); without it: "sobol"
+    #                                   # for a saltelli design with n_max, else "ensemble"
+    #                                   # (skidmc.workflows.registry)
 
     [scene]                             # one scene: a preset plus overrides (units allowed) ...
     preset = "paper-quartz"
@@ -61,6 +64,38 @@ run with a :class:`StudyError` naming the file, the key and the value. The forma
     h_min = "1 mm"
     h_max = "10 km"
 
+How study-wide and per-scene entries of one key combine. A scene's own entry
+(``[scenes.uncertain.KEY]``) replaces the study-wide ``[uncertain.KEY]`` when both have the same
+kind. When one is epistemic and the other aleatory, the key is uncertain at two levels: the
+epistemic entry gives its level (absolute, or ``relative`` to the scene's value) and the aleatory
+entry, which must say ``relative = true``, a factor on that level drawn for every sample, so the
+value sampled is the epistemic value times the aleatory factor. Friction, for example: a fixed
+but poorly known mean per finish, times drop-to-drop scatter::
+
+    [[scenes]]
+    name = "quartz"
+    preset = "paper-quartz"
+    [scenes.uncertain.mu]               # this finish's mean friction: fixed but unknown
+    distribution = "uniform"
+    loc = 0.11
+    scale = 0.05
+    kind = "epistemic"
+    source = "..."
+
+    [uncertain.mu]                      # every finish: scatter from drop to drop, a factor
+    distribution = "lognorm"
+    s = 0.1
+    relative = true
+    kind = "aleatory"
+    source = "..."
+
+The factor has a design column of its own (``"mu:aleatory_factor"``, aleatory), so such a study
+nests (``design.n_epistemic``). A scene without an epistemic entry for the key then takes the
+factor on its nominal value (the same values as the plain relative distribution). Refused, with
+both TOML keys named: an aleatory entry that is not relative where it would be the factor (in
+this scene or, for the same key, in another). The physical range is checked on the products of
+both entries' tail quantiles.
+
 Physical bounds are checked at load: every distribution's 1e-9 and 1 - 1e-9 quantiles, for every
 scene it applies to, must be valid scene values (the scene layer's ranges, and a friction
 coefficient in (0, 1)); the sampling then never leaves those quantiles
@@ -77,6 +112,7 @@ target material, ``target = "steel"`` (:mod:`skidmc.scene.materials`).
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import hashlib
 import math
@@ -102,6 +138,7 @@ from skidmc.ensemble.study_model import (
     Study,
     StudyError,
     StudyScene,
+    aleatory_factor_column,
     check_n,
     prefactor_from_rate,
 )
@@ -134,7 +171,7 @@ __all__ = [
 ]
 
 _TOP_LEVEL = ("study", "scene", "scenes", "uncertain", "correlation", "design", "solver")
-_STUDY_KEYS = ("name", "description")
+_STUDY_KEYS = ("name", "description", "kind")
 _SCENE_RESERVED = ("name", "preset", "uncertain", "experiment")
 _DIST_META = ("distribution", "source", "relative", "reference_temperature", "kind")
 _DESIGN_KEYS = ("method", "n", "seed", "second_order", "n_epistemic", "n_max",
@@ -279,12 +316,16 @@ class _Parser:
             raise self.error("study.name", name, "must be letters, digits, '.', '_' or '-' "
                              "(it names the results folder)")
         description = self.string(head, "description", "study", required=False)
+        self.string(head, "kind", "study", required=False)  # its name: skidmc.workflows
 
         common = self.uncertain(doc.get("uncertain", {}), "uncertain")
         scenes, scene_dimension = self.scenes(common)
         keys: list[str] = []
         for sc in scenes:
             keys += [k for k in sc.uncertain if k not in keys]
+        for sc in scenes:  # aleatory factors of keys uncertain at two levels: columns of their own
+            keys += [aleatory_factor_column(k) for k in sc.factors
+                     if aleatory_factor_column(k) not in keys]
         if not keys:
             raise self.error("uncertain", None, "no uncertain inputs: give at least one "
                              "[uncertain.KEY] table (use `skidmc height` for a single scene)")
@@ -313,6 +354,8 @@ class _Parser:
                     raise self.error(_toml_key("uncertain", key, "kind"), dist.kind,
                                      f"{key} is {kinds[key]} in another scene: one kind per "
                                      "input across the study")
+            for key in sc.factors:
+                kinds[aleatory_factor_column(key)] = "aleatory"
         both = len(set(kinds.values())) == 2
         if both and not design.n_epistemic:
             epistemic = [k for k in keys if kinds[k] == "epistemic"]
@@ -351,7 +394,8 @@ class _Parser:
                     raise self.error(_toml_key("scenes", i, "name"), sc.name,
                                      "duplicate scene name")
                 out.append(sc)
-            return tuple(out), True
+            return self.two_level(tuple(out), common,
+                                  [("scenes", i) for i in range(len(out))]), True
         raise self.error("scene", None, "missing: give a [scene] table (a preset plus "
                          "overrides) or several [[scenes]]")
 
@@ -370,7 +414,7 @@ class _Parser:
         except SceneError as exc:  # exc.key is "preset" for an unknown preset
             raise self.error(_toml_key(*where, exc.key), exc.value, exc.reason) from None
         own = self.uncertain(table.get("uncertain", {}), *where, "uncertain")
-        uncertain = {**common, **own}
+        uncertain, factors = self.combine(common, own, where)
         if RATE_AT_REFERENCE in uncertain and "kinetics.prefactor" in uncertain:
             raise self.error(_toml_key(*where, "uncertain"), None,
                              "kinetics.prefactor and kinetics.rate_at_reference are both "
@@ -380,12 +424,81 @@ class _Parser:
             raise self.error(_toml_key(*where, "experiment"), experiment,
                              "expected the name of an experiment (skidmc.analysis.experiments)")
         sc = StudyScene(name=name or preset or "scene", scene=scene, uncertain=uncertain,
-                        experiment=experiment)
-        self.check_rate_reference(sc)  # first: a bad T_ref also spoils the rate's support
-        for key, dist in uncertain.items():
+                        experiment=experiment, factors=factors)
+        self.check_scene(sc, own, where)
+        return sc
+
+    def check_scene(self, sc: StudyScene, own: Mapping, where: tuple) -> None:
+        """The physical range of every uncertain input of a scene (its rate first: a bad T_ref
+        also spoils the rate's support)."""
+        self.check_rate_reference(sc)
+        for key in dict.fromkeys([*sc.uncertain, *sc.factors]):
+            dist = sc.uncertain.get(key) or sc.factors[key]
             origin = (*where, "uncertain", key) if key in own else ("uncertain", key)
             self.check_support(sc, dist, origin)
-        return sc
+
+    def combine(self, common: Mapping[str, Distribution], own: Mapping[str, Distribution],
+                where: tuple) -> tuple[dict[str, Distribution], dict[str, Distribution]]:
+        """A scene's distributions from the study-wide ones (`common`) and its own (`own`).
+
+        A scene's entry replaces the study-wide entry of the same key and kind. A key with an
+        entry of each kind is uncertain at two levels: the epistemic entry gives its level
+        (absolute, or relative to the nominal value) and the aleatory entry, which must be
+        ``relative = true``, a factor on that level drawn for every sample (friction: a fixed
+        but poorly known mean per finish, times drop-to-drop scatter).
+
+        Returns
+        -------
+        uncertain, factors : dict
+            Key -> distribution of the value (or its level), key -> aleatory factor.
+        """
+        uncertain = {**common, **own}
+        factors: dict[str, Distribution] = {}
+        for key in own.keys() & common.keys():
+            if own[key].kind == common[key].kind:
+                continue
+            by_kind = {own[key].kind: (own[key], (*where, "uncertain", key)),
+                       common[key].kind: (common[key], ("uncertain", key))}
+            aleatory, at = by_kind["aleatory"]
+            epistemic, at_epistemic = by_kind["epistemic"]
+            if not aleatory.relative:
+                raise self.error(
+                    _toml_key(*at, "relative"), False,
+                    f"{key} is uncertain at two levels ({_toml_key(*at_epistemic)} epistemic, "
+                    f"{_toml_key(*at)} aleatory): the aleatory entry is a factor on the "
+                    "epistemic value and must say relative = true (the value sampled is the "
+                    "epistemic value times the factor); or give both entries the same kind, "
+                    "and the scene's own replaces the study-wide one")
+            uncertain[key], factors[key] = epistemic, aleatory
+        return uncertain, factors
+
+    def two_level(self, scenes: tuple[StudyScene, ...], common: Mapping[str, Distribution],
+                  where: tuple) -> tuple[StudyScene, ...]:
+        """Make a key uncertain at two levels in one scene so in every scene: where its only
+        entry is the study-wide aleatory one, that entry is the factor (on the nominal value:
+        the same values) in the factor's design column, so that the key's own column is
+        epistemic throughout."""
+        keys = {k for sc in scenes for k in sc.factors}
+        out = []
+        for i, sc in enumerate(scenes):
+            moved = {k: sc.uncertain[k] for k in keys
+                     if k in sc.uncertain and k not in sc.factors
+                     and sc.uncertain[k].kind == "aleatory"}
+            for key, dist in moved.items():
+                at = ("uncertain", key) if common.get(key) is dist else (*where[i], "uncertain",
+                                                                         key)
+                if not dist.relative:
+                    raise self.error(
+                        _toml_key(*at, "relative"), False,
+                        f"{key} is uncertain at two levels in another scene (an epistemic level "
+                        f"times an aleatory factor); in scene {sc.name!r} its aleatory entry is "
+                        "then that factor and must say relative = true")
+            if moved:
+                sc = dataclasses.replace(
+                    sc, uncertain={k: d for k, d in sc.uncertain.items() if k not in moved},
+                    factors={**sc.factors, **moved})
+            out.append(sc)
+        return tuple(out)
 
     # -- distributions
 
@@ -533,11 +646,15 @@ class _Parser:
         return value
 
     def check_support(self, sc: StudyScene, d: Distribution, at: tuple) -> None:
-        """Reject a distribution whose tail quantiles leave the physical range (any scene)."""
+        """Reject a distribution whose tail quantiles leave the physical range (any scene); for
+        a key uncertain at two levels, the products of both levels' tail quantiles."""
         where = _toml_key(*at)
-        nominal = sc.nominal(d.key)
-        for q in (U_TAIL, 1.0 - U_TAIL):
-            x = float(d.ppf(np.float64(q), nominal))
+        both = d.key in sc.factors and d.key in sc.uncertain
+        quantiles = ([f"{q:g}" for q in (U_TAIL, 1.0 - U_TAIL)] if not both else
+                     [f"{q:g} and the factor's {p:g}" for q in (U_TAIL, 1.0 - U_TAIL)
+                      for p in (U_TAIL, 1.0 - U_TAIL)])
+        for x, q in zip(sc.tails(d.key), quantiles):
+            x = float(x)
             reason = None
             if not math.isfinite(x):
                 reason = "is not finite there"
@@ -554,23 +671,23 @@ class _Parser:
                 reason = "must be > 0"
             if reason is not None:
                 unit = EXTRA_KEYS[d.key][0] if d.key in EXTRA_KEYS else SI_UNITS[d.key]
+                level = ("" if not both else
+                         f" times the aleatory factor {sc.factors[d.key].describe()}")
                 raise self.error(
                     where, dict(d.params),
-                    f"{d.describe()} reaches {x:.6g} [{unit}] at its {q:g} quantile in scene "
+                    f"{d.describe()}{level} reaches {x:.6g} [{unit}] at its {q} quantile in "
+                    "scene "
                     f"{sc.name!r}, outside the physical range ({reason}); use a distribution "
                     "whose support stays inside it (truncnorm with suitable a/b, lognorm, "
                     "beta, uniform, loguniform)")
 
     def check_rate_reference(self, sc: StudyScene) -> None:
         """Z = k_ref exp(E/R / T_ref) must stay a valid prefactor at the corners of the design."""
-        d = sc.uncertain.get(RATE_AT_REFERENCE)
+        d = sc.uncertain.get(RATE_AT_REFERENCE) or sc.factors.get(RATE_AT_REFERENCE)
         if d is None:
             return
-        rates = d.ppf(np.array([U_TAIL, 1.0 - U_TAIL]), sc.nominal(RATE_AT_REFERENCE))
-        ta = sc.uncertain.get("kinetics.activation_temperature")
-        temps = (ta.ppf(np.array([U_TAIL, 1.0 - U_TAIL]),
-                        sc.nominal("kinetics.activation_temperature"))
-                 if ta else [sc.nominal("kinetics.activation_temperature")])
+        rates = sc.tails(RATE_AT_REFERENCE)
+        temps = sc.tails("kinetics.activation_temperature")
         for rate in rates:
             for t_act in temps:
                 with np.errstate(over="ignore", invalid="ignore"):

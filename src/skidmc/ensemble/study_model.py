@@ -32,6 +32,7 @@ __all__ = [
     "StudyError",
     "StudyScene",
     "STUDY_RANGES",
+    "aleatory_factor_column",
     "check_n",
     "prefactor_from_rate",
 ]
@@ -68,6 +69,17 @@ EXTRA_KEYS: dict[str, tuple[str, str]] = {
 #: Tail quantile at which distributions are checked against the physical range, and at which
 #: the sampling truncates the design (so that the check covers every sample) [1].
 U_TAIL = 1e-9
+
+#: Suffix of the design column of an aleatory factor on an epistemic input (a key uncertain at
+#: two levels, :func:`aleatory_factor_column`).
+FACTOR_SUFFIX = ":aleatory_factor"
+
+
+def aleatory_factor_column(key: str) -> str:
+    """Name of the design column of the aleatory factor on `key` (``"mu:aleatory_factor"``):
+    the drop-to-drop scatter of an input whose level is itself epistemic."""
+    return key + FACTOR_SUFFIX
+
 
 #: Study-level physical ranges stricter than the scene layer's: a friction coefficient that a
 # distribution may reach (the scene accepts up to 5 to catch typos, not as physics).
@@ -195,7 +207,7 @@ class DesignSpec:
         Epistemic draws of a nested design (0: not nested); each gets `n` aleatory samples.
     n_max : int
         ``saltelli`` only: grow N (doubling, reusing the rows computed) up to this until the
-        indices are stable (0: run N only); see :mod:`skidmc.analysis.sobol_study`.
+        indices are stable (0: run N only); see :mod:`skidmc.workflows.sobol`.
     stable_threshold, stable_half_width : float
         The stability rule: every index whose interval reaches above the threshold has an
         interval half-width of at most `stable_half_width` [1].
@@ -254,21 +266,42 @@ class StudyScene:
     scene : Scene
         The nominal scene.
     uncertain : dict
-        Key -> :class:`Distribution` (study-wide ones, overridden by the scene's own).
+        Key -> :class:`Distribution` (study-wide ones, overridden by the scene's own of the same
+        kind).
     experiment : str or None
         The report's experiment this scene is compared with (``skidmc report``).
+    factors : dict
+        Key -> aleatory :class:`Distribution` (``relative``) of a factor on the key's value: the
+        key is uncertain at two levels, its sampled value is (its entry in `uncertain`, or the
+        nominal value where it has none) times this factor. Design column
+        :func:`aleatory_factor_column` of the key.
     """
 
     name: str
     scene: Scene
     uncertain: Mapping[str, Distribution]
     experiment: str | None = None
+    factors: Mapping[str, Distribution] = dataclasses.field(default_factory=dict)
+
+    def tails(self, key: str) -> np.ndarray:
+        """The extreme values of `key` the sampling can reach in this scene [SI unit of the key]:
+        its distribution at the quantiles :data:`U_TAIL` and 1 - U_TAIL, times its aleatory
+        factor's at the same quantiles where it has one (the four products: a product of two
+        monotone quantile functions is extreme at the corners)."""
+        q = np.array([U_TAIL, 1.0 - U_TAIL])
+        nominal = self.nominal(key)
+        level = (self.uncertain[key].ppf(q, nominal) if key in self.uncertain
+                 else np.array([nominal]))
+        if key not in self.factors:
+            return level
+        return np.outer(level, self.factors[key].frozen.ppf(q)).ravel()
 
     def nominal(self, key: str) -> float:
         """The scene's value of `key` [SI]; for :data:`RATE_AT_REFERENCE`, k(T_ref) of the scene."""
         values = self.scene.as_dict()
         if key == RATE_AT_REFERENCE:
-            t_ref = self.uncertain[key].reference_temperature
+            dist = self.uncertain.get(key) or self.factors[key]
+            t_ref = dist.reference_temperature
             return values["kinetics.prefactor"] * math.exp(
                 -values["kinetics.activation_temperature"] / t_ref
             )
@@ -326,7 +359,10 @@ class Study:
         return d.n
 
     def kind(self, key: str) -> str:
-        """``"aleatory"`` or ``"epistemic"``: how the uncertain input `key` is drawn."""
+        """``"aleatory"`` or ``"epistemic"``: how the design column `key` is drawn (an aleatory
+        factor's column, :func:`aleatory_factor_column`, is aleatory)."""
+        if key.endswith(FACTOR_SUFFIX):
+            return "aleatory"
         for sc in self.scenes:
             if key in sc.uncertain:
                 return sc.uncertain[key].kind

@@ -10,6 +10,11 @@ exactly the first N (d + 2) rows of the design of 2N with the same seed (tested 
 ``tests/test_sensitivity.py``), so the rows of the smaller run are copied into the larger file
 (their results with them) and only the new rows are computed. The larger file is built beside the
 result and replaces it only when complete, so an interruption loses nothing.
+
+The kind ``sobol`` of :mod:`skidmc.workflows.registry`: a study file says ``[study] kind =
+"sobol"``, or is recognised by a saltelli design with ``n_max``. ``--n`` sets the first N of
+the growth (the study's ``design.n``), ``--resume`` continues an interrupted step, ``--force``
+recomputes from the first N; ``--workers`` and ``--scheduler`` are those of every step.
 """
 
 from __future__ import annotations
@@ -19,7 +24,78 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["GrowthStep", "run_until_stable"]
+from skidmc.workflows.ensemble import ensemble_report, scene_summary_lines
+from skidmc.workflows.registry import Outcome, ReportOptions, RunOptions
+
+__all__ = ["DESCRIPTION", "REPORT_OPTIONS", "RUN_OPTIONS", "GrowthStep", "default_out", "detect",
+           "load", "report", "run", "run_until_stable"]
+
+DESCRIPTION = "a saltelli design whose N doubles until the Sobol' indices are stable"
+RUN_OPTIONS = frozenset({"out", "n", "resume", "force", "workers", "scheduler", "chunk_size"})
+REPORT_OPTIONS = frozenset({"out", "confidence"})
+
+
+def detect(doc: dict) -> bool:
+    """A saltelli design with ``n_max`` (files without ``[study] kind``)."""
+    design = doc.get("design")
+    return isinstance(design, dict) and "n_max" in design and design.get("method") == "saltelli"
+
+
+def load(path):
+    """The validated study; it must grow (``design.n_max``)."""
+    from skidmc.ensemble.study import load_study
+    from skidmc.ensemble.study_model import StudyError
+
+    study = load_study(path)
+    if not study.design.n_max:
+        raise StudyError(study.file, "design.n_max", None,
+                         "missing: kind = 'sobol' grows a saltelli design's N up to n_max "
+                         "(e.g. n_max = 4096)")
+    return study
+
+
+def default_out(study) -> Path:
+    """``results/<name>/ensemble.h5``."""
+    from skidmc.ensemble.storage import default_path
+
+    return default_path(study)
+
+
+def run(study, options: RunOptions) -> Outcome:
+    """Grow the study's N until its indices are stable (:func:`run_until_stable`)."""
+    from skidmc.ensemble.study_model import StudyError
+
+    if options.n is not None:
+        if options.n > study.design.n_max:
+            raise StudyError(study.file, "n (--n)", options.n,
+                             f"must be <= design.n_max ({study.design.n_max}): the growth "
+                             "starts at N = --n")
+        study = study.with_n(options.n)
+    lines: list[str] = []
+    log = (lambda line: None) if options.quiet else (
+        lambda line: options.log(f"skidmc run: {line}"))
+    steps = run_until_stable(study, options.out, workers=options.workers,
+                             scheduler=options.scheduler, resume=options.resume,
+                             chunk_size=options.chunk_size,
+                             progress=False if options.quiet else None, solver=options.solver,
+                             force=options.force, log=log)
+    path = _result_path(study, options.out)
+    stable = all(steps[-1]["stable"].values())
+    if not options.quiet:
+        lines.append(f"skidmc run: N = {steps[-1]['n']}: Sobol' indices "
+                     f"{'stable' if stable else 'NOT stable (n_max reached)'}")
+        lines += scene_summary_lines(path)
+    return Outcome(0, path, tuple(lines))
+
+
+def report(target, options: ReportOptions) -> Outcome:
+    """The ensemble report of the grown file (Sobol' indices among it)."""
+    return ensemble_report(target, options, default_out)
+
+
+def _result_path(study, out) -> Path:
+    path = Path(out) if out is not None else default_out(study)
+    return path if path.suffix == ".h5" else path / "ensemble.h5"
 
 
 class GrowthStep(dict):
@@ -30,7 +106,7 @@ class GrowthStep(dict):
 
 def _copy_rows(source: Path, target_file, rows: int) -> None:
     """Copy samples ``0:rows`` of every variable of a finished file into an open new one."""
-    from skidmc.analysis import open_ensemble
+    from skidmc.ensemble.storage import open_ensemble
 
     ds = open_ensemble(source)  # verifies the checksums of what is copied
     target_file.write_chunk(0, rows, {spec.name: ds[spec.name].values[..., :rows]
@@ -39,9 +115,9 @@ def _copy_rows(source: Path, target_file, rows: int) -> None:
 
 def _stability(path: Path, threshold: float, half_width: float, resamples: int,
                seed: int) -> tuple[dict, dict]:
-    from skidmc.analysis import open_ensemble
     from skidmc.analysis.report import ensemble_sobol, scene_names
     from skidmc.analysis.sensitivity import interval_half_width, sobol_stable
+    from skidmc.ensemble.storage import open_ensemble
 
     ds = open_ensemble(path)
     stable, widest = {}, {}
@@ -59,7 +135,8 @@ def _stability(path: Path, threshold: float, half_width: float, resamples: int,
 
 def run_until_stable(study, out=None, *, workers: int | None = None, progress: bool | None = None,
                      solver: Callable | None = None, resamples: int = 1000, seed: int = 0,
-                     force: bool = False,
+                     force: bool = False, resume: bool = False, scheduler=None,
+                     chunk_size: int | None = None,
                      log: Callable[[str], None] = print) -> list[GrowthStep]:
     """Run a ``saltelli`` study, doubling N until its Sobol' indices are stable or N = n_max.
 
@@ -70,8 +147,8 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
         ``stable_threshold``, ``stable_half_width``).
     out : path, optional
         Result file (default ``results/<study>/ensemble.h5``).
-    workers, progress, solver
-        As :func:`skidmc.ensemble.run.execute_study`.
+    workers, progress, solver, scheduler, chunk_size
+        As :func:`skidmc.ensemble.run.execute_study`, for every step.
     resamples, seed : int
         Of the bootstrap intervals that the rule reads.
     force : bool
@@ -88,7 +165,7 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
         Also written to ``convergence.json`` beside the result.
     """
     from skidmc.ensemble.run import execute_study
-    from skidmc.ensemble.storage import EnsembleFile, default_path, inspect_file
+    from skidmc.ensemble.storage import EnsembleFile, inspect_file
     from skidmc.ensemble.study import Study, load_study
 
     if not isinstance(study, Study):
@@ -97,9 +174,7 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
     if design.method != "saltelli" or not design.n_max:
         raise ValueError(f"design = {design.method!r}, n_max = {design.n_max!r}: the growth "
                          "needs a saltelli design with n_max")
-    path = Path(out) if out is not None else default_path(study)
-    if path.suffix != ".h5":
-        path = path / "ensemble.h5"
+    path = _result_path(study, out)
     n = design.n
     grown = path.with_name(path.stem + ".grow.h5")
     if force and grown.is_file():
@@ -133,12 +208,17 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
                                          history=f"grown from N = {n // 2}") as f:
                     _copy_rows(path, f, previous_rows)
             execute_study(current, grown, resume=True, workers=workers, progress=progress,
-                          solver=solver, command=f"skidmc run {study.file} (N = {n})")
+                          solver=solver, scheduler=scheduler, chunk_size=chunk_size,
+                          command=f"skidmc run {study.file} (N = {n})")
             os.replace(grown, path)
             new_rows = rows - previous_rows
         else:
+            # A complete file of another N is replaced; an unfinished one is continued only
+            # with `resume` (else execute_study refuses it, naming --resume and --force).
+            replace = force or bool(info and info.get("complete")) and not resume
             execute_study(current, path, workers=workers, progress=progress, solver=solver,
-                          force=bool(info), command=f"skidmc run {study.file} (N = {n})")
+                          scheduler=scheduler, chunk_size=chunk_size, resume=resume and not force,
+                          force=replace, command=f"skidmc run {study.file} (N = {n})")
             new_rows = rows
         stable, widest = _stability(path, design.stable_threshold, design.stable_half_width,
                                     resamples, seed)
@@ -154,7 +234,7 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
             log(f"not stable at N = {n}: n_max = {design.n_max} reached")
             break
         previous_rows, n = rows, 2 * n
-        force = False  # what this call computed is this study's own run
+        force = resume = False  # what this call computed is this study's own run
     record = {"threshold": design.stable_threshold, "half_width": design.stable_half_width,
               "n_max": design.n_max, "steps": steps, "stable": all(steps[-1]["stable"].values())}
     (path.parent / "convergence.json").write_text(json.dumps(record, indent=1) + "\n")

@@ -1,5 +1,13 @@
 """The handling hazard: probability per accident that a dropped billet reacts, on the skid model.
 
+The kind ``hazard`` of :mod:`skidmc.workflows.registry` (a study file with a ``[hazard]``
+table): ``skidmc run`` keeps every solver call in ``results/<name>/evaluations.h5``
+(:class:`skidmc.ensemble.storage.EvaluationLog`: checksummed; ``--resume`` replays the kept
+calls and continues, with the numbers of an uninterrupted run; a complete log of the same study
+is up to date) and writes the summary beside it; ``skidmc report`` rebuilds the summary from the
+log without a solver run. ``--n`` is refused (the estimator stops at its target CoV or run
+budget, ``[hazard.estimator]``), and so is ``--confidence`` other than the estimator's 95 %.
+
 :func:`run_hazard_study` runs a hazard study (:mod:`skidmc.ensemble.hazard_study`). An accident
 reacts when its drop height reaches the critical height of its scene, H_drop >= H_c(x); H_c
 comes from the solver through :func:`skidmc.ensemble.batch.evaluate_batch`, one batched call
@@ -60,6 +68,7 @@ from skidmc.ensemble.study_model import (
 )
 from skidmc.scene import SI_UNITS
 from skidmc.scene.units import from_si
+from skidmc.workflows.replay import RecordedSolver
 
 __all__ = [
     "BAND",
@@ -68,8 +77,24 @@ __all__ = [
     "HazardResult",
     "SurfaceEstimate",
     "categorical_critical_height",
+    "default_out",
+    "detect",
+    "load",
+    "report",
+    "run",
     "run_hazard_study",
 ]
+
+DESCRIPTION = "the probability per handling accident that a dropped billet reacts"
+RUN_OPTIONS = frozenset({"out", "resume", "force", "workers", "scheduler"})
+REPORT_OPTIONS = frozenset({"out"})
+REFUSED = {
+    "n": "the estimator stops at [hazard.estimator] target_cov or max_runs (set those "
+         "instead)",
+    "chunk_size": "its solver calls are the estimator's batches",
+    "confidence": f"its intervals are the estimator's {CONFIDENCE * 100:g} % ones, fixed when "
+                  "it ran",
+}
 
 #: Quantiles of the epistemic band of P [1].
 BAND = (0.05, 0.95)
@@ -216,7 +241,9 @@ class HazardResult:
         out["epistemic_covs"] = self.epistemic_covs.tolist()
         out["epistemic_draws"] = {k: np.asarray(v).tolist()
                                   for k, v in self.epistemic_draws.items()}
-        return _plain(out)
+        from skidmc.analysis.report import json_ready
+
+        return json_ready(out)
 
 
 # --------------------------------------------------------------------------------------------
@@ -241,11 +268,15 @@ class _Tally:
 
 def _physical(d: Distribution, nominal: float):
     """The frozen distribution of d's values [SI]: a relative one scaled by `nominal`."""
-    if not d.relative:
-        return d.frozen
+    return _scaled(d, nominal) if d.relative else d.frozen
+
+
+def _scaled(d: Distribution, factor: float):
+    """d's frozen distribution with its loc and scale times `factor` (the distribution of
+    factor x X: a relative one on its nominal value, a drop height with its median moved)."""
     params = dict(d.params)
-    params["loc"] = params.get("loc", 0.0) * nominal
-    params["scale"] = params.get("scale", 1.0) * nominal
+    params["loc"] = params.get("loc", 0.0) * factor
+    params["scale"] = params.get("scale", 1.0) * factor
     return getattr(stats, d.name)(**params)
 
 
@@ -380,14 +411,6 @@ def _design_log_density(est: _Estimate) -> float:
     return math.log(est.surface.weight) + log_s - 0.5 * float(u @ u)
 
 
-def _scaled_drop(d: Distribution, factor: float):
-    """d's drop-height distribution scaled by `factor` (its median times factor)."""
-    params = dict(d.params)
-    params["loc"] = params.get("loc", 0.0) * factor
-    params["scale"] = params.get("scale", 1.0) * factor
-    return getattr(stats, d.name)(**params)
-
-
 def _reweighted(results: list[tuple[float, DropHeightResult]], drop) -> tuple[float, float]:
     """sum_s w_s P_s and its standard error, for another drop-height distribution."""
     total, variance = 0.0, 0.0
@@ -482,7 +505,8 @@ def categorical_critical_height(study: HazardStudy, *, workers: int | None = 1,
 
 def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None, *,
                      workers: int | None = None, solver: Callable | None = None,
-                     progress: Callable[[str], None] | None = None) -> HazardResult:
+                     progress: Callable[[str], None] | None = None, scheduler=None,
+                     log=None, replay_only: bool = False) -> HazardResult:
     """Probability per accident that a handling drop reacts, with its intervals and drivers.
 
     Parameters
@@ -503,6 +527,15 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
         ``failed``) and ``failure_reason`` arrays; for tests and cheaper models.
     progress : callable, optional
         Called with a line of text after each estimate.
+    scheduler : str, optional
+        As :func:`~skidmc.ensemble.batch.evaluate_batch`'s (``local``, ``dask`` or an
+        address); passed to the solver only when given.
+    log : skidmc.ensemble.storage.EvaluationLog, optional
+        Keeps every solver call (and replays those it holds already): a resumed run gives the
+        numbers of an uninterrupted one. Completed (gathered into one file) at the end.
+    replay_only : bool
+        With `log`: every call must come from the log (a report); a call it lacks raises
+        StorageError.
 
     Returns
     -------
@@ -518,6 +551,11 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
         study = load_hazard_study(study)
     if solver is None:
         from skidmc.ensemble.batch import evaluate_batch as solver
+    if scheduler is not None:
+        solver = _with_scheduler(solver, scheduler)
+    recorder = None
+    if log is not None:
+        solver = recorder = RecordedSolver(solver, log, replay_only)
     say = progress or (lambda _line: None)
     options = study.estimator
     tally = _Tally()
@@ -604,10 +642,152 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
         failed=tally.failed, failure_reasons=tuple(tally.reasons), elasticity=elasticity,
         notes=tuple(dict.fromkeys(notes)), wall_time=time.perf_counter() - started,
     )
+    if recorder is not None and not replay_only:
+        log.complete(recorder.calls)
     if out_dir is not None:
         files = _write(result, study, Path(out_dir))
         result = dataclasses.replace(result, files=tuple(str(f) for f in files))
     return result
+
+
+def _with_scheduler(solver: Callable, scheduler) -> Callable:
+    def solve(columns, options, **kwargs):
+        return solver(columns, options, scheduler=scheduler, **kwargs)
+    return solve
+
+
+# --------------------------------------------------------------------------------------------
+# the kind of study (skidmc.workflows.registry)
+# --------------------------------------------------------------------------------------------
+
+
+def detect(doc: dict) -> bool:
+    """A ``[hazard]`` table (:func:`skidmc.ensemble.hazard_study.is_hazard_study`)."""
+    return "hazard" in doc
+
+
+def load(path) -> HazardStudy:
+    """The validated hazard study."""
+    return load_hazard_study(path)
+
+
+def default_out(study: HazardStudy) -> Path:
+    """``results/<name>/evaluations.h5`` (the summary beside it)."""
+    return Path("results") / study.name / "evaluations.h5"
+
+
+def _paths(study: HazardStudy, out) -> tuple[Path, Path]:
+    """(evaluation log, folder of the summary) for ``--out`` (a folder, or the log's .h5)."""
+    if out is None:
+        path = default_out(study)
+    else:
+        out = Path(out)
+        path = out if out.suffix == ".h5" else out / "evaluations.h5"
+    return path, path.parent
+
+
+def _log(study: HazardStudy, path: Path):
+    from skidmc.ensemble.storage import EvaluationLog
+
+    return EvaluationLog(path, {"study_name": study.name, "study_sha256": study.sha256,
+                                "study_text": study.text, "study_file": str(study.file)})
+
+
+def _summary_sha(folder: Path) -> str:
+    try:
+        return json.loads((folder / "summary.json").read_text())["study"]["sha256"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return ""
+
+
+def run(study: HazardStudy, options):
+    """``skidmc run`` of a hazard study: through the evaluation log (resume, up to date,
+    checksums), then the summary."""
+    from skidmc.ensemble.run import RunInterrupted
+    from skidmc.ensemble.storage import StorageError
+    from skidmc.workflows.registry import Outcome
+
+    path, folder = _paths(study, options.out)
+    log = _log(study, path)
+    info = log.info()
+    say = (lambda line: None) if options.quiet else (lambda line: options.log(line))
+    if options.force:
+        log.discard()
+        info = log.info()
+    if info["exists"] and info["study_sha256"] != study.sha256:
+        raise StorageError(path, "holds the solver calls of another study (or another version "
+                           "of this one); skidmc run --force recomputes it")
+    if info["exists"] and not info["complete"] and not options.resume:
+        raise StorageError(path, f"holds an unfinished run ({info['calls']} solver calls kept): "
+                           "skidmc run --resume continues it, --force starts over")
+    summary_ok = _summary_sha(folder) == study.sha256 and (folder / "summary.md").is_file()
+    if summary_ok and not options.force and (info["complete"] or not info["exists"]):
+        return Outcome(0, folder / "summary.md", () if options.quiet else (
+            f"{folder / 'summary.md'}: up to date (a complete run of this study); nothing "
+            "computed (--force recomputes it)",))
+    from skidmc.ensemble.executors import DaskExecutor, check_scheduler
+
+    scheduler = check_scheduler(options.scheduler)
+    executor = None
+    if scheduler not in (None, "local"):  # one dask client for every solver call
+        executor = DaskExecutor(None if scheduler == "dask" else scheduler, options.workers)
+        scheduler = executor.client
+    log.start(keep=info["exists"])
+    try:
+        result = run_hazard_study(study, folder, workers=options.workers, solver=options.solver,
+                                  scheduler=scheduler, progress=say, log=log)
+    except KeyboardInterrupt:
+        kept = log.info()["calls"]
+        raise RunInterrupted(f"{kept} solver calls kept in {log.folder}; skidmc run "
+                             f"{options.study_path or study.file} --resume continues with the "
+                             "same numbers") from None
+    finally:
+        if executor is not None:
+            executor.shutdown()
+    low, high = result.interval
+    lines = () if options.quiet else (
+        f"skidmc run: P(reaction per accident) = {result.probability:.3g} [{low:.3g}, "
+        f"{high:.3g}] ({CONFIDENCE * 100:g} %), {result.runs['total']} solver runs; "
+        f"{folder / 'summary.md'}",)
+    return Outcome(0, folder / "summary.md", lines)
+
+
+def report(target, options):
+    """``skidmc report`` of a hazard study (or its evaluations.h5): the summary rebuilt from the
+    kept solver calls (no solver run), else the one the run wrote."""
+    from skidmc.workflows.registry import Outcome
+
+    if isinstance(target, Path):
+        from skidmc.ensemble.storage import EvaluationLog
+        from skidmc.workflows.registry import study_of_result
+
+        file = EvaluationLog(target, {}).info().get("study_file") or str(target)
+        study = load_hazard_study_text(study_of_result(target), file)
+        path = target
+    else:
+        study = target
+        path = default_out(study)
+    folder = Path(options.out) if options.out else path.parent
+    log = _log(study, path)
+    info = log.info()
+    if info["complete"] and info["study_sha256"] == study.sha256:
+        run_hazard_study(study, folder, log=log, replay_only=True,
+                         solver=_no_solver)
+    summary = folder / "summary.md"
+    if not summary.is_file() or _summary_sha(folder) != study.sha256:
+        return Outcome(2, None, (f"skidmc report: error: {options.source}: no result yet at "
+                                 f"{path}; run it first: skidmc run {options.source}",))
+    return Outcome(0, summary, (), (summary.read_text().rstrip("\n"),))
+
+
+def load_hazard_study_text(text: str, file: str) -> HazardStudy:
+    from skidmc.ensemble.hazard_study import parse_hazard_study
+
+    return parse_hazard_study(text, file=file)
+
+
+def _no_solver(*args, **kwargs):  # pragma: no cover - replay_only never calls it
+    raise RuntimeError("a report does not run the solver")
 
 
 def _surface_estimate(est: _Estimate) -> SurfaceEstimate:
@@ -640,7 +820,7 @@ def _fragility(study: HazardStudy, pooled: list[_Estimate], outer) -> dict[str, 
     out: dict[str, list[float]] = {"median": [], "probability": [], "cov": [], "band_low": [],
                                    "band_high": []}
     for factor in FRAGILITY_FACTORS:
-        drop = _scaled_drop(study.drop_height, factor)
+        drop = _scaled(study.drop_height, factor)
         p, se = _reweighted(strata, drop)
         out["median"].append(median * factor)
         out["probability"].append(p)
@@ -654,22 +834,6 @@ def _fragility(study: HazardStudy, pooled: list[_Estimate], outer) -> dict[str, 
 # --------------------------------------------------------------------------------------------
 # output
 # --------------------------------------------------------------------------------------------
-
-
-def _plain(value):
-    """JSON-ready: numpy scalars to Python, non-finite floats to strings."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        value = float(value)
-        return value if math.isfinite(value) else str(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
 
 
 def _unit(key: str) -> str:
@@ -846,32 +1010,3 @@ def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
     fig.savefig(paths[-1], dpi=100)
     plt.close(fig)
     return paths
-
-
-def main(argv=None) -> int:
-    """``python -m skidmc.analysis.handling STUDY [OUT_DIR] [--workers N]``: run and summarise.
-
-    OUT_DIR defaults to ``results/<study name>``. Prints the summary's first lines.
-    """
-    import argparse
-
-    parser = argparse.ArgumentParser(prog="python -m skidmc.analysis.handling",
-                                     description="Run a hazard study (skidmc.analysis.handling).")
-    parser.add_argument("study", help="hazard study file (TOML with a [hazard] table)")
-    parser.add_argument("out_dir", nargs="?", help="results folder (default results/<name>)")
-    parser.add_argument("--workers", type=int, default=1,
-                        help="local worker processes (default 1: in this process)")
-    args = parser.parse_args(argv)
-    study = load_hazard_study(args.study)
-    out = Path(args.out_dir) if args.out_dir else Path("results") / study.name
-    result = run_hazard_study(study, out, workers=args.workers,
-                              progress=lambda line: print(line, flush=True))
-    lo, hi = result.interval
-    print(f"P = {result.probability:.3g} per accident, 95 % [{lo:.3g}, {hi:.3g}], "
-          f"epistemic 5-95 % [{result.band[0]:.3g}, {result.band[1]:.3g}]; "
-          f"{result.runs['total']} solver runs; written to {out}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
