@@ -60,7 +60,10 @@ def test_every_scene_has_an_epistemic_friction_mean_times_drop_to_drop_scatter(n
     # Read from the TOML itself: the loader's representation of the two-level key may change.
     doc = tomllib.loads((ROOT / "studies" / f"{name}.toml").read_text())
     aleatory = doc["uncertain"]["mu"]
-    assert aleatory["kind"] == "aleatory" and aleatory["relative"] and aleatory["s"] == 0.2
+    # Drop to drop: sd 0.2 about 1, truncated at +/-3 sd (docs/inputs.md, Friction).
+    assert aleatory["kind"] == "aleatory" and aleatory["relative"]
+    assert (aleatory["distribution"], aleatory["loc"], aleatory["scale"]) == ("truncnorm", 1.0, 0.2)
+    assert (aleatory["a"], aleatory["b"]) == (-3, 3)
     for sc in doc["scenes"]:
         mu = sc["uncertain"]["mu"]
         assert mu["kind"] == "epistemic" and mu["relative"], sc["name"]
