@@ -190,6 +190,10 @@ def test_cli_plan_experiment(capsys):
     assert main(["plan", "--experiment", "alumina_50_80"]) == 0
     text = capsys.readouterr().out
     assert "next drop:" in text and "current H50:" in text and "expected gain" in text
+    assert main(["plan", "--experiment", "alumina_50_80", "--discrepancy", "0.6"]) == 0
+    assert "discrepancy sd 0.6" in capsys.readouterr().out
+    assert main(["plan", "--experiment", "alumina_50_80", "--discrepancy", "-1"]) == 2
+    assert "discrepancy_sd" in capsys.readouterr().err
 
 
 def test_cli_plan_csv(tmp_path, capsys):

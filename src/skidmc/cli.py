@@ -565,6 +565,9 @@ def _add_plan_parser(subparsers) -> None:
                       "--experiment or --target); vague: a decade at 1 sd around --guess "
                       "(default: physics where a target is known, else vague)")
     plan.add_argument("--target", metavar="NAME", help="target of the physics prior for a CSV")
+    plan.add_argument("--discrepancy", type=float, default=0.0, metavar="SD",
+                      help="model-discrepancy sd added to the physics prior's sd of ln H50 "
+                      "(default: 0)")
     plan.add_argument("--guess", type=_positive_float, metavar="H",
                       help="centre of the vague prior [units] (default: the drops' geometric "
                       "mean)")
@@ -625,7 +628,8 @@ def _add_plan_parser(subparsers) -> None:
                     raise ValueError(f"{args.drops}: outcome {bad[0]!r} is not 1/0 or E/N")
             kind = args.prior if target else "vague"
             if kind == "physics":
-                prior = physics_prior(target, units=args.units)
+                prior = physics_prior(target, units=args.units,
+                                      discrepancy_sd=args.discrepancy)
             else:
                 centre = args.guess or (float(np.exp(np.mean(np.log(heights))))
                                         if len(heights) else None)

@@ -489,7 +489,7 @@ class Neyer:
             return 0.5 * (lowest_go + highest_nogo)
         if gap >= 0:
             m = min(max(0.5 * (lowest_go + highest_nogo), xlo), xhi)
-            s = min(self.sg, xhi - xlo)
+            s = min(self.sg, xhi - xlo) if xhi > xlo else self.sg  # one height tested: sigma_g
             self.sg *= 0.8
             return _d_optimal(x, y, m, s)
         # overlap: part 3, the D-optimal level at the maximum-likelihood estimate

@@ -43,6 +43,7 @@ __all__ = [
     "NormalPrior",
     "ProbitPosterior",
     "physics_prior",
+    "posterior_from_prior",
     "posterior_h50_table",
     "probit_posterior",
     "vague_prior",
