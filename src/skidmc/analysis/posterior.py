@@ -460,7 +460,9 @@ def probit_posterior(heights, went, *, prior_location, prior_log_sigma, scale: s
         Number of posterior draws returned (exact samples of the grid density).
     seed : int or numpy Generator, optional
     grid : (int, int), optional
-        Cells in ln sigma and in m of the final grid.
+        Cells in ln sigma and in m of the final grid. The cost grows with the number of
+        distinct (height, outcome) pairs times the cells: about 0.1 s for the report's drop
+        series, about 10 ms per distinct drop beyond that.
 
     Returns
     -------
