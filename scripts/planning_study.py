@@ -267,11 +267,11 @@ def main(argv=None) -> int:
     parser.add_argument("--truths", type=int, default=50, help="truths per target and set")
     parser.add_argument("--budget", type=int, default=200, help="most drops per sequence")
     parser.add_argument("--seed", type=int, default=43)
-    parser.add_argument("--quick", action="store_true", help="3 truths, budget 30 (a smoke run)")
+    parser.add_argument("--quick", action="store_true", help="2 truths, budget 20 (a smoke run)")
     parser.add_argument("--out", default="results/planning")
     args = parser.parse_args(argv)
     if args.quick:
-        args.truths, args.budget = 3, 30
+        args.truths, args.budget = 2, 20
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     start, cpu_start = time.perf_counter(), time.process_time()
