@@ -383,6 +383,132 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return _finish(kind, get_kind(kind).report(subject, options))
 
 
+# --- skidmc plan (issue 43) ----------------------------------------------------------------------
+
+
+def _add_plan_parser(subparsers) -> None:
+    """Register ``skidmc plan``: the next drop to make, from drops so far and a prior."""
+
+    def _in_unit_interval(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {text!r}") from None
+        if not 0.0 < value < 1.0:
+            raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text!r}")
+        return value
+
+    plan = subparsers.add_parser(
+        "plan", help="the next go/no-go drop to make, with the current H50 and its interval",
+        description="The drop height that minimises the expected posterior variance of ln H50 "
+        "(or of ln q_p with --p) after its outcome (docs/planning.md). Drops from a report "
+        "experiment (--experiment) or a CSV file with a column height_ft or height_m (or height "
+        "with --units) and a column go (1/0) or outcome (E/N).",
+    )
+    plan.add_argument("drops", nargs="?", help="CSV file of the drops made so far")
+    plan.add_argument("--experiment", metavar="NAME",
+                      help="use the report's drops of this target (quartz, alumina_20_35, "
+                      "alumina_50_80, gold)")
+    plan.add_argument("--prior", choices=("physics", "vague"), default="physics",
+                      help="physics: the model's prior predictive of the target (needs "
+                      "--experiment or --target); vague: a decade at 1 sd around --guess "
+                      "(default: physics where a target is known, else vague)")
+    plan.add_argument("--target", metavar="NAME", help="target of the physics prior for a CSV")
+    plan.add_argument("--discrepancy", type=float, default=0.0, metavar="SD",
+                      help="model-discrepancy sd added to the physics prior's sd of ln H50 "
+                      "(default: 0)")
+    plan.add_argument("--guess", type=_positive_float, metavar="H",
+                      help="centre of the vague prior [units] (default: the drops' geometric "
+                      "mean)")
+    plan.add_argument("--units", choices=("ft", "m"), default="ft", help="height unit")
+    plan.add_argument("--p", type=_in_unit_interval, default=0.5,
+                      help="plan for the height with P(go) = p (default: 0.5, H50)")
+    plan.add_argument("--credibility", type=_in_unit_interval, default=0.9,
+                      help="level of the printed interval (default: 0.9)")
+    plan.add_argument("--json", action="store_true", help="print JSON")
+
+    def _cmd_plan(args: argparse.Namespace) -> int:
+        import csv
+        from dataclasses import asdict
+
+        import numpy as np
+
+        from skidmc.analysis.experiments import get_experiment
+        from skidmc.analysis.planning import next_drop
+        from skidmc.analysis.posterior import physics_prior, vague_prior
+
+        try:
+            if (args.drops is None) == (args.experiment is None):
+                raise ValueError("give either a CSV file of drops or --experiment NAME")
+            target = args.experiment or args.target
+            if args.experiment:
+                drops = get_experiment(args.experiment, units=args.units).drops
+                if drops is None:
+                    raise ValueError(f"--experiment {args.experiment!r}: the report lists no "
+                                     "drops for it")
+                heights, went = drops.heights, drops.went
+            else:
+                with open(args.drops, newline="", encoding="utf-8") as f:
+                    rows = list(csv.DictReader(line for line in f if not line.startswith("#")))
+                if not rows:
+                    raise ValueError(f"{args.drops}: no drops")
+                column = next((c for c in (f"height_{args.units}", "height") if c in rows[0]),
+                              None)
+                other = {"ft": "m", "m": "ft"}[args.units]
+                factor = 1.0
+                if column is None and f"height_{other}" in rows[0]:
+                    column = f"height_{other}"
+                    factor = 0.3048 if other == "ft" else 1 / 0.3048
+                if column is None:
+                    raise ValueError(f"{args.drops}: needs a column height_ft, height_m or "
+                                     f"height; has {', '.join(rows[0])}")
+                heights = np.array([float(r[column]) * factor for r in rows])
+                if "go" in rows[0]:
+                    cells = [r["go"].strip() for r in rows]
+                    bad = [c for c in cells if c not in ("0", "1")]
+                    went = np.array([c == "1" for c in cells])
+                elif "outcome" in rows[0]:
+                    cells = [r["outcome"].strip().upper() for r in rows]
+                    bad = [c for c in cells if c not in ("E", "N")]
+                    went = np.array([c == "E" for c in cells])
+                else:
+                    raise ValueError(f"{args.drops}: needs a column go (1/0) or outcome (E/N)")
+                if bad:
+                    raise ValueError(f"{args.drops}: outcome {bad[0]!r} is not 1/0 or E/N")
+            kind = args.prior if target else "vague"
+            if kind == "physics":
+                prior = physics_prior(target, units=args.units,
+                                      discrepancy_sd=args.discrepancy)
+            else:
+                centre = args.guess or (float(np.exp(np.mean(np.log(heights))))
+                                        if len(heights) else None)
+                if centre is None:
+                    raise ValueError("--guess H is needed for a vague prior without drops")
+                prior = vague_prior(centre, units=args.units)
+            result = next_drop(heights, went, prior, p=args.p, credibility=args.credibility,
+                               units=args.units)
+        except (ValueError, OSError) as err:
+            print(f"skidmc plan: error: {err}", file=sys.stderr)
+            return 2
+        if args.json:
+            print(json.dumps({**asdict(result), "expected_gain": result.expected_gain},
+                             indent=2))
+            return 0
+        u = args.units
+        name = "H50" if args.p == 0.5 else f"H{100 * args.p:g}"
+        med, low, high = result.estimate
+        print(f"drops so far: {result.n} ({result.n_go} go)")
+        print(f"prior: {result.prior}")
+        print(f"current {name}: {med:.3g} {u} ({args.credibility:.0%} interval {low:.3g} to "
+              f"{high:.3g} {u})")
+        print(f"next drop: {result.height:.3g} {u} (P(go) there {result.p_go:.2f})")
+        print(f"expected gain: sd of ln {name} {result.sd_now:.3f} -> {result.sd_expected:.3f} "
+              f"(variance -{result.expected_gain:.4f})")
+        return 0
+
+    plan.set_defaults(func=_cmd_plan)
+
+
 # --- parser and entry point ----------------------------------------------------------------------
 
 
@@ -437,6 +563,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_run_parser(subparsers)
     _add_report_parser(subparsers)
+    _add_plan_parser(subparsers)
     return parser
 
 

@@ -29,6 +29,8 @@ from skidmc.analysis.gonogo import (
     updown,
 )
 from skidmc.analysis.hazard import drop_height_probability
+from skidmc.analysis.planning import SequentialPlan, next_drop  # noqa: F401
+from skidmc.analysis.posterior import physics_prior, probit_posterior  # noqa: F401
 from skidmc.analysis.rare_events import rare_event_probability
 from skidmc.analysis.sensitivity import (
     grow_until_stable,
