@@ -160,7 +160,8 @@ def test_summary_states_skill_against_base_rate_and_coin(tmp_path):
     a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
     k = skill_scores(a.scores.p_go, a.experiment.drops.went)
     text = (tmp_path / "summary.md").read_text()
-    row = next(line for line in text.splitlines() if line.startswith("| quartz | 10 (4) |"))
+    skill = text[text.index("## Skill of the predicted go curve"):]
+    row = next(line for line in skill.splitlines() if line.startswith("| quartz | 10 (4) |"))
     assert f"{k.log_score:.3g}" in row and f"{k.log_score_base_rate:.3g}" in row
     assert "0.693" in row and "0.25" in row
     assert k.verdict("log") in row and k.verdict("brier") in row

@@ -36,7 +36,7 @@ from skidmc.ensemble.study import (
     load_study,
     parse_study,
 )
-from skidmc.scene import get_preset
+from skidmc.scene import get_preset, make_scene
 from skidmc.workflows import registry
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,7 +99,9 @@ def test_paper_series1_scenes_and_kinetics_pair():
     # The kinetics pair is not sampled independently: Z goes through the rate at T_ref.
     assert "kinetics.activation_temperature" in study.keys
     assert RATE_AT_REFERENCE in study.keys and "kinetics.prefactor" not in study.keys
-    assert study.scenes[0].scene == get_preset("paper-gold")
+    # The gold scene is the report's target as built: the preset on the registry's stack.
+    assert study.scenes[0].scene == make_scene(preset="paper-gold", target="gold-stack-report")
+    assert study.scenes[0].scene.target_layers
 
 
 def test_paper_series2_finishes():
