@@ -15,17 +15,18 @@ sigma, Q; every input log-normal, so P(reaction | surface) = Phi(-m_s / s_tot) e
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 from test_handling import MEDIAN_LOG, NOT_FAILED, S_TOTAL, STUDY, StandIn
 
 from skidmc.ensemble.hazard_study import load_hazard_study, parse_hazard_study
 from skidmc.ensemble.study_model import StudyError
 from skidmc.workflows.hazard import run_hazard_study
-from scipy import stats
 
-ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[1]
 
 # The stand-in's pendulum geometry: ln H_c higher by this much (any shift the test can see).
 PENDULUM_SHIFT = 0.4

@@ -10,6 +10,7 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
     [hazard]
     name = "hazard-handling"            # results go to results/<name>/
     description = "..."
+    assumptions = ["...", "..."]        # every judgement in words: the summary prints them
 
     [hazard.scene]                      # the billet and everything not sampled: a preset ...
     preset = "paper-quartz"             # ... (its HE and kinetics) plus overrides with units
@@ -37,6 +38,14 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
     scale = 0.24
     source = "..."
 
+    [[hazard.surface]]                  # a surface the model does not describe (required for
+    material = "rubber"                 # an elastic material): listed with its weight, never
+    weight = 0.13                       # run; its weight is reported as an unmodelled share
+    source = "..."                      # beside P (bound [P, P + w]), not as "no reaction"
+    outside_model = "elastic: ..."
+    [hazard.surface.friction]
+    ...
+
     [hazard.billet.flow_stress]         # billet population (aleatory, drop to drop): flow
     distribution = "lognorm"            # stress, mass, diameter, initial temperature, he.*
     s = 0.15
@@ -48,6 +57,11 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
     loc = "15000 K"                                        # kinetics.rate_at_reference
     scale = "19000 K"
     source = "..."
+
+    [hazard.alternatives]               # optional, shown beside the headline:
+    configuration = "pendulum"          # P under the other geometry (pooled estimate)
+    angle_scales = ["5 deg", "15 deg"]  # P with the angle's scale replaced: the same samples
+                                        # reweighted, rerun where they do not cover it
 
     [hazard.estimator]
     method = "is"                       # "is" (importance sampling) or "mc" (conditional MC)
@@ -64,7 +78,10 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
 Distributions follow the rules of :mod:`skidmc.ensemble.study`: scipy's parameter names, values
 with units where the key has units (a bare number is read in SI and refused where implausible),
 ``relative = true`` for a factor on the scene's value, a ``source`` on every one, and the
-1e-9 and 1 - 1e-9 quantiles must be valid scene values for every surface. Every error is a
+1e-9 and 1 - 1e-9 quantiles must be valid scene values for every surface. Each surface's
+regime (:data:`REGIMES`) follows from its material: ``outside`` where the file says
+``outside_model`` (an elastic material must), ``yielding`` where its hardness
+(``target.hardness``) lies below the billet's sampled flow stress, else ``rigid``. Every error is a
 :class:`~skidmc.ensemble.study_model.StudyError` naming the file, the key path and the value as
 written.
 """

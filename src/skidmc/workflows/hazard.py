@@ -1093,7 +1093,7 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
             f"{np.max(r.epistemic_covs):.2f}.")
     lines += [
         f"- Solver runs: {r.runs['total']} ({r.runs['pooled']} pooled, {r.runs['epistemic']} "
-        f"epistemic loop), tier `{study.solver.tier}`, rtol {study.solver.rtol:g}; "
+        f"epistemic loop, {r.runs.get('alternatives', 0)} geometry and angle alternatives), tier `{study.solver.tier}`, rtol {study.solver.rtol:g}; "
         f"failures: {r.failed}.",
         f"- Solver tolerance: -d ln P / d ln H_c = {r.elasticity:.1f}, so an error of rtol = "
         f"{study.solver.rtol:g} on every H_c would move P by about "
@@ -1144,7 +1144,8 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
                   "P at other plausible scales of the angle distribution, from the same solver "
                   "samples reweighted by the ratio of the angle densities f_alt(phi) / f(phi) "
                   "(no extra solver run; unbiased where the samples cover the alternative, the "
-                  "CoV says how well; the epistemic band likewise from the draws' samples). "
+                  "CoV says how well; the epistemic band likewise from the draws' samples, "
+                  "so it is no better covered than the reweighted P on its row). "
                   "\"Beyond sampled range\": the alternative's probability of angles beyond "
                   "the study's 1e-9 quantiles, which no sample reached (an upper bound on what "
                   "the reweighting misses).", "",
@@ -1186,6 +1187,9 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
               "| surface | H_c at its design point | ln density (relative) |", "|---|---|---|"]
     top = max(s.design_log_density for s in r.surfaces)
     for s in r.surfaces:
+        if s.regime == "outside":
+            lines.append(f"| {s.material} | outside the model (not run) | - |")
+            continue
         lines.append(f"| {s.material} | {s.design_critical_height:.3g} m | "
                      f"{s.design_log_density - top:+.1f} |")
     f = r.fragility
@@ -1205,7 +1209,8 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
     lines += [f"- {a}" for a in study.assumptions] or [
         "- (the study file lists none: `assumptions = [...]` in [hazard])"]
     lines += ["", "Every sampled input and its source, as the study file gives it:", "",
-              "| input | distribution | source |", "|---|---|---|",
+              "| input | distribution (parameters in SI: Pa, K, J/kg, 1/s; angle in deg; "
+              "`x nominal`: a factor on the scene's value) | source |", "|---|---|---|",
               f"| drop height [m] | {study.drop_height.describe()} | "
               f"{study.drop_height.source} |",
               f"| impact angle [deg] | {study.angle.describe()} | {study.angle.source} |"]
@@ -1291,7 +1296,7 @@ def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
 
     ax1.legend(handles=[Patch(color="C3", label="reactions need a higher value"),
                         Patch(color="C0", label="reactions need a lower value")],
-               fontsize=7, loc="lower right")
+               fontsize=7, loc="best")
     names = [s.material for s in r.surfaces]
     x = np.arange(len(names))
     ax2.bar(x - 0.2, [s.weight for s in r.surfaces], 0.4, color="C7",
@@ -1301,15 +1306,17 @@ def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
     ax2.bar(x + 0.2, shares, 0.4, color="C1", label="share of P")
     ax2.set_yscale("log")
     floor = min([v for v in shares if np.isfinite(v)] + [0.01])
-    ax2.set_ylim(max(floor / 3, 1e-16), 2.0)
+    bottom = max(floor / 3, 1e-16)
+    ax2.set_ylim(bottom, 50.0)  # room above 1 for the legend
     for k, s in enumerate(r.surfaces):
         if s.regime == "outside":
-            ax2.text(k + 0.2, max(floor / 2, 1e-15), "outside\nthe model\n(not in P)",
-                     rotation=90, fontsize=6, ha="center", va="bottom")
+            ax2.text(k + 0.2, math.sqrt(bottom), "outside the model:\nnot in P", rotation=90,
+                     fontsize=7, ha="center", va="center", color="C1")
     ax2.set_xticks(x, [f"{n}\n({s.regime})" for n, s in zip(names, r.surfaces)], rotation=30,
                    fontsize=7)
-    ax2.set_ylabel("share (log scale)", fontsize=8)
-    ax2.legend(fontsize=7, loc="lower left")
+    ax2.set_xlim(-0.6, len(names) - 0.4)
+    ax2.set_ylabel("fraction (log scale)", fontsize=8)
+    ax2.legend(fontsize=7, loc="upper right", ncol=2)
     fig.suptitle(f"{r.name}: what drives a reaction (left: inputs, pooled; right: surfaces)",
                  fontsize=10)
     fig.tight_layout()
