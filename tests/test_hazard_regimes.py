@@ -232,3 +232,22 @@ def test_angle_band_brackets_within_draws(run):
         shift = math.log(a["scale_deg"] / 20.0) / 0.2
         want = (stats.norm.sf(z - shift) + stats.norm.cdf(-z - shift)) * (1 - RUBBER)
         assert a["uncovered"] == pytest.approx(want, rel=1e-6)
+
+
+def test_committed_result_is_of_the_shipped_study_and_states_its_claims():
+    # results/hazard-handling/ is committed: it must be the run of the study file as shipped
+    # (same SHA-256), with the regimes, the unmodelled share, the alternatives and assumptions.
+    import json
+
+    folder = ROOT / "results" / "hazard-handling"
+    study = load_hazard_study(ROOT / "studies" / "hazard-handling.toml")
+    data = json.loads((folder / "summary.json").read_text())
+    assert data["study"]["sha256"] == study.sha256
+    assert data["unmodelled_weight"] == pytest.approx(study.unmodelled_weight)
+    assert data["bounds"][1] == pytest.approx(data["probability"] + study.unmodelled_weight)
+    assert data["alternative"]["configuration"] == "pendulum"
+    assert [a["scale_deg"] for a in data["angle_scales"]] == [10.0, 5.0, 15.0, 20.0]
+    text = (folder / "summary.md").read_text()
+    for a in study.assumptions:
+        assert f"- {a}" in text
+    assert "| rubber | outside the model |" in text
