@@ -198,7 +198,8 @@ class HazardResult:
     interval : tuple of float
         Its 95 % interval (normal approximation of the sum over surfaces) [1].
     surfaces : tuple of SurfaceEstimate
-        The pooled estimate per surface; the shares sum to `probability`.
+        The pooled estimate per surface, in file order; the modelled surfaces' shares sum to
+        `probability` (a surface outside the model has NaN conditional and share).
     epistemic_probabilities : numpy.ndarray
         P at each epistemic draw (empty without an epistemic loop) [1].
     epistemic_covs : numpy.ndarray
