@@ -1094,7 +1094,8 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
             f"{np.max(r.epistemic_covs):.2f}.")
     lines += [
         f"- Solver runs: {r.runs['total']} ({r.runs['pooled']} pooled, {r.runs['epistemic']} "
-        f"epistemic loop, {r.runs.get('alternatives', 0)} geometry and angle alternatives), tier `{study.solver.tier}`, rtol {study.solver.rtol:g}; "
+        f"epistemic loop, {r.runs.get('alternatives', 0)} geometry and angle alternatives), "
+        f"tier `{study.solver.tier}`, rtol {study.solver.rtol:g}; "
         f"failures: {r.failed}.",
         f"- Solver tolerance: -d ln P / d ln H_c = {r.elasticity:.1f}, so an error of rtol = "
         f"{study.solver.rtol:g} on every H_c would move P by about "
