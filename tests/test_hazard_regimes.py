@@ -251,3 +251,19 @@ def test_committed_result_is_of_the_shipped_study_and_states_its_claims():
     for a in study.assumptions:
         assert f"- {a}" in text
     assert "| rubber | outside the model |" in text
+
+
+def test_categorical_form_never_runs_an_outside_surface():
+    # The single-input form (surface as a categorical input, for the generic methods): rows on
+    # the outside surface get H_c = inf without a solver call.
+    from skidmc.workflows.hazard import categorical_critical_height
+
+    solver = GeometryStandIn()
+    study = parse_hazard_study(study_text(extra=False, draws=0))
+    critical_height, marginals, names = categorical_critical_height(study, solver=solver)
+    rng = np.random.default_rng(3)
+    x = np.column_stack([m.rvs(size=400, random_state=rng) for m in marginals])
+    h = critical_height(x)
+    rubber = np.rint(x[:, 0]).astype(int) == 2
+    assert rubber.any() and np.all(np.isinf(h[rubber]))
+    assert solver.elastic_calls == 0

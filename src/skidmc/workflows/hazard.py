@@ -491,7 +491,9 @@ def categorical_critical_height(study: HazardStudy, *, workers: int | None = 1,
     friction's standard normal score (each surface maps it through its own friction
     distribution), then the other aleatory inputs. The epistemic inputs stay at the scene's
     values. This is the form the generic rare-event methods and a single-proposal structured
-    estimate need; :func:`run_hazard_study` stratifies by surface instead.
+    estimate need; :func:`run_hazard_study` stratifies by surface instead. A surface outside
+    the model keeps its category (its weight) but is never run: its rows get H_c = inf, so the
+    event is the headline's "a modelled surface and a reaction".
 
     Parameters
     ----------
@@ -531,6 +533,9 @@ def categorical_critical_height(study: HazardStudy, *, workers: int | None = 1,
         for k, (surface, h) in enumerate(zip(study.surfaces, heights)):
             rows = index == k
             if not rows.any():
+                continue
+            if not surface.modelled:  # outside the model: not run, not a reaction of it
+                out[rows] = np.inf
                 continue
             z = score[rows]
             friction = _marginals(study, surface, ("mu",))[0]
