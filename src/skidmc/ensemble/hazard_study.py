@@ -10,6 +10,7 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
     [hazard]
     name = "hazard-handling"            # results go to results/<name>/
     description = "..."
+    assumptions = ["...", "..."]        # every judgement in words: the summary prints them
 
     [hazard.scene]                      # the billet and everything not sampled: a preset ...
     preset = "paper-quartz"             # ... (its HE and kinetics) plus overrides with units
@@ -37,6 +38,14 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
     scale = 0.24
     source = "..."
 
+    [[hazard.surface]]                  # a surface the model does not describe (required for
+    material = "rubber"                 # an elastic material): listed with its weight, never
+    weight = 0.13                       # run; its weight is reported as an unmodelled share
+    source = "..."                      # beside P (bound [P, P + w]), not as "no reaction"
+    outside_model = "elastic: ..."
+    [hazard.surface.friction]
+    ...
+
     [hazard.billet.flow_stress]         # billet population (aleatory, drop to drop): flow
     distribution = "lognorm"            # stress, mass, diameter, initial temperature, he.*
     s = 0.15
@@ -48,6 +57,11 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
     loc = "15000 K"                                        # kinetics.rate_at_reference
     scale = "19000 K"
     source = "..."
+
+    [hazard.alternatives]               # optional, shown beside the headline:
+    configuration = "pendulum"          # P under the other geometry (pooled estimate)
+    angle_scales = ["5 deg", "15 deg"]  # P with the angle's scale replaced: the same samples
+                                        # reweighted, rerun where they do not cover it
 
     [hazard.estimator]
     method = "is"                       # "is" (importance sampling) or "mc" (conditional MC)
@@ -64,7 +78,10 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
 Distributions follow the rules of :mod:`skidmc.ensemble.study`: scipy's parameter names, values
 with units where the key has units (a bare number is read in SI and refused where implausible),
 ``relative = true`` for a factor on the scene's value, a ``source`` on every one, and the
-1e-9 and 1 - 1e-9 quantiles must be valid scene values for every surface. Every error is a
+1e-9 and 1 - 1e-9 quantiles must be valid scene values for every surface. Each surface's
+regime (:data:`REGIMES`) follows from its material: ``outside`` where the file says
+``outside_model`` (an elastic material must), ``yielding`` where its hardness
+(``target.hardness``) lies below the billet's sampled flow stress, else ``rigid``. Every error is a
 :class:`~skidmc.ensemble.study_model.StudyError` naming the file, the key path and the value as
 written.
 """
@@ -113,6 +130,7 @@ __all__ = [
     "ESTIMATOR_METHODS",
     "EstimatorOptions",
     "HazardStudy",
+    "REGIMES",
     "Surface",
     "is_hazard_study",
     "load_hazard_study",
@@ -135,8 +153,14 @@ _OWNED_KEYS = {"mu": "[[hazard.surface]] friction", "angle": "[hazard.angle]",
                **{k: "the surface's material" for k in TARGET_KEYS}}
 
 _HAZARD_KEYS = ("name", "description", "scene", "drop_height", "angle", "surface", "billet",
-                "epistemic", "estimator", "solver")
-_SURFACE_KEYS = ("material", "weight", "source", "friction")
+                "epistemic", "estimator", "solver", "assumptions", "alternatives")
+_SURFACE_KEYS = ("material", "weight", "source", "friction", "outside_model")
+_ALTERNATIVE_KEYS = ("configuration", "angle_scales")
+
+#: Regimes of a surface: the report's rigid target, a target that yields under the billet
+#: (contact pressure min(sigma, p_t), docs/model.md "Targets softer than the billet"), or one
+#: the model does not describe (its weight is an unmodelled share of the accidents).
+REGIMES: tuple[str, ...] = ("rigid", "yielding", "outside")
 _ESTIMATOR_KEYS = ("method", "target_cov", "max_runs", "seed", "epistemic_draws",
                    "epistemic_target_cov")
 _DROP_META = ("distribution", "source")
@@ -161,6 +185,12 @@ class Surface:
         Apparent friction coefficient mu on this surface [1].
     scene : Scene
         The study's scene with this material as the target.
+    regime : {"rigid", "yielding", "outside"}
+        How the model treats the surface (:data:`REGIMES`): rigid (hardness above the billet's
+        flow stress), yielding (below it: contact pressure p_t) or outside the model (not run;
+        its weight is reported as an unmodelled share).
+    regime_note : str
+        The regime in words, with the hardness and its source (or why it is outside).
     """
 
     material: str
@@ -168,6 +198,13 @@ class Surface:
     source: str
     friction: Distribution
     scene: Scene
+    regime: str = "rigid"
+    regime_note: str = ""
+
+    @property
+    def modelled(self) -> bool:
+        """Whether the model describes this surface (rigid or yielding)."""
+        return self.regime != "outside"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -220,6 +257,14 @@ class HazardStudy:
     solver : SolverOptions
     text, sha256, file : str
         The file's text, its SHA-256 and where it was read from.
+    assumptions : tuple of str
+        The study's judgements in words (``assumptions = [...]``), printed in the summary.
+    alternative_configuration : str or None
+        A second geometry (``[hazard.alternatives] configuration``) under which P is also
+        estimated (pooled, no epistemic loop).
+    angle_alternatives : tuple of Distribution
+        The angle distribution at other scales (``[hazard.alternatives] angle_scales``): P at
+        each from the same samples, reweighted.
     """
 
     name: str
@@ -235,6 +280,19 @@ class HazardStudy:
     text: str
     sha256: str
     file: str
+    assumptions: tuple[str, ...] = ()
+    alternative_configuration: str | None = None
+    angle_alternatives: tuple[Distribution, ...] = ()
+
+    @property
+    def modelled_surfaces(self) -> tuple[Surface, ...]:
+        """The surfaces the model describes (rigid or yielding), in file order."""
+        return tuple(s for s in self.surfaces if s.modelled)
+
+    @property
+    def unmodelled_weight(self) -> float:
+        """Share of accidents on surfaces outside the model [1]."""
+        return math.fsum(s.weight for s in self.surfaces if not s.modelled)
 
     @property
     def aleatory_keys(self) -> tuple[str, ...]:
@@ -346,14 +404,51 @@ class _HazardParser(_Parser):
                              f"{both[0]} is also in [hazard.billet]: an input is either "
                              "aleatory (billet) or epistemic, not both")
         surfaces = self.surfaces(head.get("surface"), scene, angle, billet, epistemic)
+        if not any(s.modelled for s in surfaces):
+            raise self.error("hazard.surface", [s.material for s in surfaces], "every surface "
+                             "is outside the model: there is nothing to estimate")
         estimator = self.estimator(head.get("estimator"))
         solver = self.solver_options(head.get("solver", {}))
+        assumptions = self.assumptions(head.get("assumptions", []))
+        configuration, angles = self.alternatives(head.get("alternatives", {}), scene,
+                                                  head["angle"])
         return HazardStudy(
             name=name, description=description, scene=scene, drop_height=drop, angle=angle,
             surfaces=surfaces, billet=billet, epistemic=epistemic, estimator=estimator,
             solver=solver, text=text, sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(),
-            file=self.file,
+            file=self.file, assumptions=assumptions, alternative_configuration=configuration,
+            angle_alternatives=angles,
         )
+
+    def assumptions(self, value: object) -> tuple[str, ...]:
+        if not isinstance(value, list) or not all(isinstance(v, str) and v.strip()
+                                                  for v in value):
+            raise self.error("hazard.assumptions", value, "expected a list of sentences, one "
+                             "judgement of the study each (printed under Assumptions)")
+        return tuple(v.strip() for v in value)
+
+    def alternatives(self, table: object, scene: Scene, angle_spec: dict):
+        at = ("hazard", "alternatives")
+        table = self.table(table, *at)
+        self.unknown_keys(table, _ALTERNATIVE_KEYS, *at)
+        configuration = table.get("configuration")
+        if configuration is not None and configuration not in ("pendulum", "vertical"):
+            raise self.error("hazard.alternatives.configuration", configuration,
+                             "expected 'pendulum' or 'vertical'")
+        if configuration == scene.configuration:
+            raise self.error("hazard.alternatives.configuration", configuration,
+                             f"the study's scene is {configuration} already: name the other "
+                             "geometry")
+        scales = table.get("angle_scales", [])
+        if not isinstance(scales, list):
+            raise self.error("hazard.alternatives.angle_scales", scales,
+                             "expected a list of angles with units, e.g. ['5 deg', '15 deg']")
+        angles = []
+        for i, scale in enumerate(scales):
+            spec = {**angle_spec, "scale": scale}
+            angles.append(self.checked_distribution("angle", spec,
+                                                    (*at, "angle_scales", i)))
+        return configuration, tuple(angles)
 
     # -- scene and distributions
 
@@ -531,14 +626,50 @@ class _HazardParser(_Parser):
             for part, group in (("billet", billet), ("epistemic", epistemic)):
                 for key, d in group.items():
                     self.check_support(sc, d, ("hazard", part, key))
+            regime, note = self.regime(table, at, material, surface_scene, billet)
             out.append(Surface(material=material, weight=float(weight), source=source,
-                               friction=friction, scene=surface_scene))
+                               friction=friction, scene=surface_scene, regime=regime,
+                               regime_note=note))
         total = math.fsum(s.weight for s in out)
         if abs(total - 1.0) > _WEIGHT_TOLERANCE:
             raise self.error("hazard.surface", {s.material: s.weight for s in out},
                              f"the weights sum to {total:.6g}, not 1: they are the shares of "
                              "accidents on each surface")
         return tuple(out)
+
+    def regime(self, table: Mapping, at: tuple, material: str, scene: Scene,
+               billet: Mapping[str, Distribution]) -> tuple[str, str]:
+        """(regime, note) of a surface: outside, yielding or rigid, from its hardness against
+        the billet's flow stress (its distribution's 1e-9..1-1e-9 range where it is sampled)."""
+        entry = get_material(material)
+        outside = table.get("outside_model")
+        if outside is not None and (not isinstance(outside, str) or not outside.strip()):
+            raise self.error(_toml_key(*at, "outside_model"), outside, "expected why this "
+                             "surface lies outside the model, in words")
+        if entry.elastic and outside is None:
+            raise self.error(_toml_key(*at, "material"), material, "an elastic material: the "
+                             "report's plastic-contact model cannot describe it ("
+                             f"{entry.hardness_source}); keep it with `outside_model = \"why\"` "
+                             "(its weight is then reported as an unmodelled share, not as no "
+                             "reaction) or remove it")
+        if outside is not None:
+            return "outside", f"outside the model: {outside.strip()}"
+        hardness = float(scene.target_hardness)
+        if "flow_stress" in billet:
+            d = billet["flow_stress"]
+            frozen = _scaled_frozen(d, scene.flow_stress)
+            low, high = float(frozen.ppf(1e-9)), float(frozen.isf(1e-9))
+        else:
+            low = high = float(scene.flow_stress)
+        if not math.isfinite(hardness) or hardness >= high:
+            return "rigid", ("rigid: hardness above every sampled flow stress of the billet "
+                             f"({entry.hardness_source})")
+        pressure = f"{hardness / 1e6:.3g} MPa ({hardness / 6894.757:.4g} psi)"
+        part = ("for every sampled billet" if hardness <= low else
+                f"for billets whose flow stress exceeds it (sampled range "
+                f"{low / 1e6:.3g}-{high / 1e6:.3g} MPa)")
+        return "yielding", (f"yielding: contact pressure p_t = {pressure} {part}, below the "
+                            f"billet's flow stress (source: {entry.hardness_source})")
 
     # -- settings
 
@@ -582,6 +713,16 @@ class _HazardParser(_Parser):
             return self.solver(self.table(table, "hazard", "solver"))
         except StudyError as exc:  # the study parser names solver.*; here it is hazard.solver.*
             raise self.error("hazard." + exc.key, exc.value, exc.reason) from None
+
+
+def _scaled_frozen(d: Distribution, nominal: float):
+    """d's frozen distribution [SI], a relative one scaled by `nominal`."""
+    if not d.relative:
+        return d.frozen
+    params = dict(d.params)
+    params["loc"] = params.get("loc", 0.0) * nominal
+    params["scale"] = params.get("scale", 1.0) * nominal
+    return getattr(scipy.stats, d.name)(**params)
 
 
 def _dotted_keys(table: Mapping, prefix: tuple[str, ...] = ()) -> list[str]:

@@ -130,6 +130,16 @@ class SurfaceSpec(_Strict):
     weight: float = Field(gt=0, le=1)
     source: str = Field(min_length=1)
     friction: DistributionSpec
+    #: Why this surface lies outside the model (required for an elastic material, e.g. rubber):
+    #: its weight is reported as an unmodelled share, not counted as "no reaction".
+    outside_model: str | None = Field(None, min_length=1)
+
+
+class AlternativesSpec(_Strict):
+    """What the summary shows besides the headline: another geometry, other angle scales."""
+
+    configuration: Literal["pendulum", "vertical"] | None = None
+    angle_scales: list[str] = []
 
 
 class EstimatorSpec(_Strict):
@@ -152,6 +162,8 @@ class HazardTable(_Strict):
     epistemic: dict[str, DistributionSpec] = {}
     estimator: EstimatorSpec
     solver: SolverSpec = SolverSpec()
+    assumptions: list[str] = []
+    alternatives: AlternativesSpec | None = None
 
 
 class HazardFile(_Strict):

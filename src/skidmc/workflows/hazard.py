@@ -96,6 +96,14 @@ REFUSED = {
                   "it ran",
 }
 
+#: Largest impact angle sent to the solver [deg]: the scene's angle lies in (0, 90) deg, and a
+#: wide half-normal (20 deg scale: 6.8e-6 beyond 90 deg) is clipped to grazing there.
+ANGLE_MAX = 89.0
+#: P at another angle scale is rerun (pooled, at the epistemic draws' target CoV) when the
+#: reweighted estimate's CoV exceeds this, or its alternative puts more than
+#: RERUN_UNCOVERED x P beyond the angles the study sampled.
+RERUN_COV = 0.2
+RERUN_UNCOVERED = 0.1
 #: Quantiles of the epistemic band of P [1].
 BAND = (0.05, 0.95)
 
@@ -147,6 +155,12 @@ class SurfaceEstimate:
         Samples the solver failed on (taken as no reaction).
     failed_bound : float
         How much `share` would rise if every failed sample had reacted [1].
+    regime : str
+        ``rigid``, ``yielding`` or ``outside`` (:data:`skidmc.ensemble.hazard_study.REGIMES`);
+        an ``outside`` surface is not run: its conditional and share are NaN and its weight is
+        the result's `unmodelled_weight`.
+    regime_note : str
+        The regime in words, with the hardness and its source.
     """
 
     material: str
@@ -163,6 +177,8 @@ class SurfaceEstimate:
     importance: dict[str, float]
     failed: int
     failed_bound: float
+    regime: str = "rigid"
+    regime_note: str = ""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -174,13 +190,16 @@ class HazardResult:
     name : str
         The study's name.
     probability : float
-        Probability of a reaction per accident, epistemic inputs averaged in (pooled) [1].
+        Probability per accident of an accident on a surface the model describes *and* a
+        reaction, epistemic inputs averaged in (pooled) [1]: the headline. Surfaces outside
+        the model are not in it (see `unmodelled_weight`, `bounds`).
     cov : float
         Its coefficient of variation [1].
     interval : tuple of float
         Its 95 % interval (normal approximation of the sum over surfaces) [1].
     surfaces : tuple of SurfaceEstimate
-        The pooled estimate per surface; the shares sum to `probability`.
+        The pooled estimate per surface, in file order; the modelled surfaces' shares sum to
+        `probability` (a surface outside the model has NaN conditional and share).
     epistemic_probabilities : numpy.ndarray
         P at each epistemic draw (empty without an epistemic loop) [1].
     epistemic_covs : numpy.ndarray
@@ -209,6 +228,26 @@ class HazardResult:
         Caveats in words (tier, budget, failures).
     wall_time : float
         Seconds the run took [s].
+    unmodelled_weight : float
+        Share of accidents on surfaces outside the model [1].
+    bounds : tuple of float
+        What the model supports about the probability per accident over all surfaces:
+        [probability, probability + unmodelled_weight] (an unmodelled accident may or may not
+        react) [1].
+    conditional_modelled : float
+        P(reaction | a surface the model describes) = probability / (1 - unmodelled_weight) [1].
+    alternative : dict
+        P under ``[hazard.alternatives] configuration`` (pooled, no epistemic loop):
+        ``configuration``, ``probability``, ``cov``, ``interval``, ``runs``, ``surfaces``
+        (material -> P(reaction | surface)); empty when the study names none.
+    angle_scales : list of dict
+        P at other angle distributions from the same samples reweighted by the ratio of the
+        angle densities: ``distribution``, ``probability``, ``cov``, ``band_low``,
+        ``band_high``, ``uncovered`` (the alternative's probability of angles beyond the
+        study's sampled range, an upper bound on what the reweighting cannot see) [1], and
+        ``rerun`` (``probability``, ``cov``, ``interval``, ``runs``: a direct estimate with
+        fresh samples) where the reweighting does not cover the alternative
+        (:data:`RERUN_COV`, :data:`RERUN_UNCOVERED`).
     files : tuple of str
         Files written.
     """
@@ -231,6 +270,11 @@ class HazardResult:
     elasticity: float
     notes: tuple[str, ...]
     wall_time: float
+    unmodelled_weight: float = 0.0
+    bounds: tuple[float, float] = (math.nan, math.nan)
+    conditional_modelled: float = math.nan
+    alternative: dict = dataclasses.field(default_factory=dict)
+    angle_scales: list = dataclasses.field(default_factory=list)
     files: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
@@ -299,6 +343,9 @@ class _CriticalHeight:
         self.tally = tally
         self.low = np.array([m.ppf(U_TAIL) for m in marginals])
         self.high = np.array([m.isf(U_TAIL) for m in marginals])
+        if "angle" in keys:  # a wide angle distribution's tail beyond grazing: clipped to it
+            j = list(keys).index("angle")
+            self.high[j] = min(self.high[j], ANGLE_MAX)
         self.failed_rows: set[bytes] = set()
         self.runs = 0
         self.failed = 0
@@ -444,7 +491,9 @@ def categorical_critical_height(study: HazardStudy, *, workers: int | None = 1,
     friction's standard normal score (each surface maps it through its own friction
     distribution), then the other aleatory inputs. The epistemic inputs stay at the scene's
     values. This is the form the generic rare-event methods and a single-proposal structured
-    estimate need; :func:`run_hazard_study` stratifies by surface instead.
+    estimate need; :func:`run_hazard_study` stratifies by surface instead. A surface outside
+    the model keeps its category (its weight) but is never run: its rows get H_c = inf, so the
+    event is the headline's "a modelled surface and a reaction".
 
     Parameters
     ----------
@@ -484,6 +533,9 @@ def categorical_critical_height(study: HazardStudy, *, workers: int | None = 1,
         for k, (surface, h) in enumerate(zip(study.surfaces, heights)):
             rows = index == k
             if not rows.any():
+                continue
+            if not surface.modelled:  # outside the model: not run, not a reaction of it
+                out[rows] = np.inf
                 continue
             z = score[rows]
             friction = _marginals(study, surface, ("mu",))[0]
@@ -564,9 +616,14 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
     notes: list[str] = []
 
     # pooled: aleatory and epistemic inputs together, one estimate per surface
+    # (a surface outside the model is not run: its weight is reported, not taken as no reaction)
     keys = (*study.aleatory_keys, *study.epistemic_keys)
     pooled: list[_Estimate] = []
     for surface, child in zip(study.surfaces, pooled_seeds.spawn(len(study.surfaces))):
+        if not surface.modelled:
+            say(f"pooled {surface.material}: outside the model, not run (weight "
+                f"{surface.weight:g} reported as unmodelled)")
+            continue
         est = _estimate(study, surface, keys, {}, options.target_cov,
                         int(child.generate_state(1)[0]), solver, workers, tally)
         pooled.append(est)
@@ -576,6 +633,9 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
     pooled_runs = tally.runs
 
     surfaces = tuple(_surface_estimate(est) for est in pooled)
+    listed = {s.material: s for s in surfaces}
+    listed.update({s.material: _outside_estimate(s) for s in study.surfaces if not s.modelled})
+    all_surfaces = tuple(listed[s.material] for s in study.surfaces)
     probability = math.fsum(s.share for s in surfaces)
     error = math.sqrt(math.fsum((s.share * s.cov) ** 2 for s in surfaces
                                 if math.isfinite(s.cov)))
@@ -594,6 +654,8 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
             fixed = {k: float(v[j]) for k, v in draws.items()}
             parts, variance = [], 0.0
             for surface, grandchild in zip(study.surfaces, child.spawn(len(study.surfaces))):
+                if not surface.modelled:
+                    continue
                 est = _estimate(study, surface, study.aleatory_keys, fixed,
                                 options.epistemic_target_cov,
                                 int(grandchild.generate_state(1)[0]), solver, workers, tally)
@@ -606,6 +668,7 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
             outer_p.append(p_j)
             outer_cov.append(math.sqrt(variance) / p_j if p_j > 0 else math.inf)
             say(f"epistemic draw {j + 1}/{options.epistemic_draws}: P = {p_j:.3g}")
+    epistemic_runs = tally.runs - pooled_runs
     outer_p_arr = np.array(outer_p)
     band = ((float(np.quantile(outer_p_arr, BAND[0])), float(np.quantile(outer_p_arr, BAND[1])))
             if outer_p else (math.nan, math.nan))
@@ -619,6 +682,21 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
     fragility = _fragility(study, pooled, outer)
     strata = [(e.surface.weight, e.result) for e in pooled]
     elasticity = _elasticity(strata, study.drop_height.frozen)
+    angle_scales = _angle_scales(study, pooled, outer)
+    rerun_seeds = seeds.spawn(1)[0].spawn(max(1, len(angle_scales)))
+    for entry, d, child in zip(angle_scales[1:], study.angle_alternatives, rerun_seeds):
+        if entry["cov"] > RERUN_COV or entry["uncovered"] > RERUN_UNCOVERED * entry[
+                "probability"]:
+            entry["rerun"] = _rerun_angle(study, d, keys, child, solver, workers, tally, say)
+            notes += entry["rerun"].pop("notes")
+
+    # the alternative geometry: the pooled estimate again, each surface's scene reconfigured
+    alternative: dict = {}
+    if study.alternative_configuration is not None:
+        alternative = _alternative(study, keys, seeds.spawn(1)[0], solver, workers, tally,
+                                   say)
+        notes += alternative.pop("notes")
+    alternative_runs = tally.runs - pooled_runs - epistemic_runs
 
     if study.solver.tier == "fast":
         notes.append(f"fast tier: its measured error on H_c (p90 {FAST_TIER_P90_ERROR:.1%}, "
@@ -637,11 +715,16 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
         surfaces=surfaces, epistemic_probabilities=outer_p_arr,
         epistemic_covs=np.array(outer_cov), epistemic_draws=draws, band=band,
         design_point=design, importance=importance, fragility=fragility,
-        runs={"pooled": pooled_runs, "epistemic": tally.runs - pooled_runs,
-              "total": tally.runs},
+        runs={"pooled": pooled_runs, "epistemic": epistemic_runs,
+              "alternatives": alternative_runs, "total": tally.runs},
         failed=tally.failed, failure_reasons=tuple(tally.reasons), elasticity=elasticity,
         notes=tuple(dict.fromkeys(notes)), wall_time=time.perf_counter() - started,
+        unmodelled_weight=study.unmodelled_weight,
+        bounds=(probability, min(1.0, probability + study.unmodelled_weight)),
+        conditional_modelled=probability / (1.0 - study.unmodelled_weight),
+        alternative=alternative, angle_scales=angle_scales,
     )
+    result = dataclasses.replace(result, surfaces=all_surfaces)
     if recorder is not None and not replay_only:
         log.complete(recorder.calls)
     if out_dir is not None:
@@ -795,6 +878,7 @@ def _surface_estimate(est: _Estimate) -> SurfaceEstimate:
     w = est.surface.weight
     return SurfaceEstimate(
         material=est.surface.material, weight=w, conditional=r.probability,
+        regime=est.surface.regime, regime_note=est.surface.regime_note,
         share=w * r.probability, cov=r.cov, interval=(w * r.interval[0], w * r.interval[1]),
         runs=r.evaluations, converged=r.converged,
         design_point={k: float(v) for k, v in zip(est.keys, r.design_point)},
@@ -803,6 +887,115 @@ def _surface_estimate(est: _Estimate) -> SurfaceEstimate:
         importance={k: float(v) for k, v in zip(est.keys, r.posterior_mean_standard)},
         failed=est.limit_state.failed, failed_bound=w * _failed_bound(est),
     )
+
+
+def _outside_estimate(surface: Surface) -> SurfaceEstimate:
+    """A surface outside the model: listed with its weight, no estimate (NaN), not run."""
+    return SurfaceEstimate(
+        material=surface.material, weight=surface.weight, conditional=math.nan,
+        share=math.nan, cov=math.nan, interval=(math.nan, math.nan), runs=0, converged=True,
+        design_point={}, design_critical_height=math.nan, design_log_density=-math.inf,
+        importance={}, failed=0, failed_bound=0.0, regime="outside",
+        regime_note=surface.regime_note)
+
+
+def _alternative(study: HazardStudy, keys, seed: np.random.SeedSequence, solver, workers,
+                 tally: _Tally, say) -> dict:
+    """The pooled estimate under the alternative configuration (the tilt follows it)."""
+    configuration = study.alternative_configuration
+    before = tally.runs
+    parts, notes = [], []
+    for surface, child in zip(study.surfaces, seed.spawn(len(study.surfaces))):
+        if not surface.modelled:
+            continue
+        other = dataclasses.replace(surface, scene=surface.scene.replace(
+            configuration=configuration))
+        est = _estimate(study, other, keys, {}, study.estimator.target_cov,
+                        int(child.generate_state(1)[0]), solver, workers, tally)
+        notes += [f"{configuration}: {n}" for n in est.notes]
+        parts.append((surface, est.result))
+        say(f"{configuration} {surface.material}: P(reaction | surface) = "
+            f"{est.result.probability:.3g} (CoV {est.result.cov:.2f})")
+    p = math.fsum(s.weight * r.probability for s, r in parts)
+    error = math.sqrt(math.fsum((s.weight * r.probability * r.cov) ** 2 for s, r in parts
+                                if r.probability > 0))
+    return {"configuration": configuration, "probability": p,
+            "cov": error / p if p > 0 else math.inf,
+            "interval": (max(0.0, p - _Z * error), min(1.0, p + _Z * error)),
+            "runs": tally.runs - before,
+            "surfaces": {s.material: r.probability for s, r in parts}, "notes": notes}
+
+
+def _rerun_angle(study: HazardStudy, angle: Distribution, keys, seed, solver, workers,
+                 tally: _Tally, say) -> dict:
+    """The pooled estimate again with another angle distribution (fresh samples), each
+    surface at the epistemic draws' target CoV (a cheaper check than the headline's)."""
+    other = dataclasses.replace(study, angle=angle)
+    parts, notes, before = [], [], tally.runs
+    for surface, child in zip(study.surfaces, seed.spawn(len(study.surfaces))):
+        if not surface.modelled:
+            continue
+        est = _estimate(other, surface, keys, {}, study.estimator.epistemic_target_cov,
+                        int(child.generate_state(1)[0]), solver, workers, tally)
+        notes += [f"angle {angle.describe()}: {n}" for n in est.notes]
+        parts.append((surface, est.result))
+    p = math.fsum(s.weight * r.probability for s, r in parts)
+    error = math.sqrt(math.fsum((s.weight * r.probability * r.cov) ** 2 for s, r in parts
+                                if r.probability > 0))
+    say(f"angle {angle.describe()} rerun: P = {p:.3g}")
+    return {"probability": p, "cov": error / p if p > 0 else math.inf,
+            "interval": (max(0.0, p - _Z * error), min(1.0, p + _Z * error)),
+            "runs": tally.runs - before, "notes": notes}
+
+
+def _angle_log_ratio(study: HazardStudy, keys, samples: np.ndarray, other) -> np.ndarray:
+    """ln(f_other(phi) / f_study(phi)) of each sample's angle (the density ratio that turns the
+    study's samples into samples of another angle distribution)."""
+    phi = samples[:, list(keys).index("angle")]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = other.logpdf(phi) - study.angle.frozen.logpdf(phi)
+    return np.where(np.isfinite(out), out, -np.inf)
+
+
+def _angle_reweighted(study, parts, other) -> tuple[float, float]:
+    """sum_s w_s P_s and its standard error under another angle distribution."""
+    total, variance = 0.0, 0.0
+    for weight, keys, r in parts:
+        n = r.critical_heights.size
+        terms = n * r.contributions * np.exp(_angle_log_ratio(study, keys, r.samples, other))
+        total += weight * float(terms.mean())
+        variance += weight**2 * float(terms.var(ddof=1)) / n
+    return total, math.sqrt(variance)
+
+
+def _angle_scales(study: HazardStudy, pooled: list[_Estimate], outer) -> list[dict]:
+    """P at each ``angle_scales`` alternative (and at the study's own), from the same samples.
+
+    Each sample's contribution is multiplied by f_alt(phi) / f(phi): unbiased where the
+    sampling density covers the alternative's, and the CoV (from the reweighted terms' spread)
+    says how well it does. Samples were clipped to the study's 1e-9..1-1e-9 angle quantiles
+    before the solver; the alternative's probability beyond them (``uncovered``) is what the
+    reweighting cannot see (an upper bound on the part of P it misses, per accident).
+    """
+    if not study.angle_alternatives:
+        return []
+    high = float(study.angle.frozen.isf(U_TAIL))
+    low = float(study.angle.frozen.ppf(U_TAIL))
+    strata = [(e.surface.weight, e.keys, e.result) for e in pooled]
+    out = []
+    for d in (study.angle, *study.angle_alternatives):
+        other = d.frozen
+        p, se = _angle_reweighted(study, strata, other)
+        draws = [_angle_reweighted(study, [(w, study.aleatory_keys, r) for w, r in parts],
+                                   other)[0] for parts in outer]
+        uncovered = float(other.sf(high) + other.cdf(low))
+        out.append({"distribution": d.describe(), "scale_deg": dict(d.params).get("scale"),
+                    "probability": p, "cov": se / p if p > 0 else math.inf,
+                    "band_low": float(np.quantile(draws, BAND[0])) if draws else math.nan,
+                    "band_high": float(np.quantile(draws, BAND[1])) if draws else math.nan,
+                    "uncovered": uncovered * (1.0 - study.unmodelled_weight),
+                    "study": d is study.angle})
+    return out
 
 
 def _epistemic_draws(study: HazardStudy, n: int, seed: np.random.SeedSequence):
@@ -881,8 +1074,22 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
         "## Probability of a reaction per accident",
         "",
         f"- **P = {r.probability:.3g}** per accident, 95 % interval [{lo:.3g}, {hi:.3g}], "
-        f"CoV {r.cov:.3f} (epistemic inputs averaged in: the pooled estimate).",
+        f"CoV {r.cov:.3f} (epistemic inputs averaged in: the pooled estimate)"
+        + (": accidents on the surfaces the model describes that end in a reaction."
+           if r.unmodelled_weight > 0 else "."),
     ]
+    outside = [s for s in r.surfaces if s.regime == "outside"]
+    if outside:
+        names = ", ".join(f"{s.material} ({s.weight:.0%} of accidents)" for s in outside)
+        lines += [
+            f"- **Outside the model: {names}.** These accidents are not in P and not counted "
+            "as \"no reaction\": the model says nothing about them. The probability per "
+            f"accident over all surfaces lies in **[{r.bounds[0]:.3g}, {r.bounds[1]:.3g}]** "
+            f"(P, and P plus the unmodelled share {r.unmodelled_weight:.3g}, as if every "
+            "unmodelled accident reacted). Were they to react as often as the modelled ones, "
+            f"it would be P / (1 - {r.unmodelled_weight:.3g}) = {r.conditional_modelled:.3g} "
+            "(P(reaction | a modelled surface)); that is a judgement, not a result.",
+        ]
     if r.epistemic_probabilities.size:
         e = r.epistemic_probabilities
         lines.append(
@@ -892,7 +1099,8 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
             f"{np.max(r.epistemic_covs):.2f}.")
     lines += [
         f"- Solver runs: {r.runs['total']} ({r.runs['pooled']} pooled, {r.runs['epistemic']} "
-        f"epistemic loop), tier `{study.solver.tier}`, rtol {study.solver.rtol:g}; "
+        f"epistemic loop, {r.runs.get('alternatives', 0)} geometry and angle alternatives), "
+        f"tier `{study.solver.tier}`, rtol {study.solver.rtol:g}; "
         f"failures: {r.failed}.",
         f"- Solver tolerance: -d ln P / d ln H_c = {r.elasticity:.1f}, so an error of rtol = "
         f"{study.solver.rtol:g} on every H_c would move P by about "
@@ -900,15 +1108,74 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
         "",
         "## Per surface (pooled)",
         "",
-        "| surface | weight | P(reaction given surface) | share of P per accident | "
+        "| surface | regime | weight | P(reaction given surface) | share of P per accident | "
         "95 % interval of share | CoV | runs | failed |",
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for s in r.surfaces:
-        lines.append(f"| {s.material} | {s.weight:g} | {s.conditional:.3g} | {s.share:.3g} | "
-                     f"[{s.interval[0]:.3g}, {s.interval[1]:.3g}] | {s.cov:.3f} | {s.runs} | "
-                     f"{s.failed} |")
-    lines += ["", f"The shares sum to P = {r.probability:.3g}.", "",
+        if s.regime == "outside":
+            lines.append(f"| {s.material} | outside the model | {s.weight:g} | not modelled | "
+                         f"not in P (unmodelled share {s.weight:g}) | - | - | 0 | - |")
+            continue
+        lines.append(f"| {s.material} | {s.regime} | {s.weight:g} | {s.conditional:.3g} | "
+                     f"{s.share:.3g} | [{s.interval[0]:.3g}, {s.interval[1]:.3g}] | "
+                     f"{s.cov:.3f} | {s.runs} | {s.failed} |")
+    lines += ["", f"The shares of the modelled surfaces sum to P = {r.probability:.3g}.", "",
+              "Regime of each surface (the contact pressure the model uses: the billet's flow "
+              "stress sigma on a rigid target, min(sigma, p_t) on one that yields at p_t; "
+              "docs/model.md, \"Targets softer than the billet\"):", ""]
+    lines += [f"- **{s.material}**: {s.regime_note}" for s in r.surfaces]
+    if r.alternative:
+        a = r.alternative
+        alo, ahi = a["interval"]
+        lines += ["", f"## Geometry: {study.scene.configuration} drop against "
+                  f"{a['configuration']}", "",
+                  f"The headline uses the {study.scene.configuration} geometry (report Sec. "
+                  "II.C: the billet falls onto a surface inclined at the impact angle, tilt = "
+                  f"angle). Under the {a['configuration']} geometry (the billet level, tilt = "
+                  "0: a billet carried level that meets the floor obliquely) the same "
+                  f"population gives **P = {a['probability']:.3g}** [{alo:.3g}, {ahi:.3g}] "
+                  f"(CoV {a['cov']:.3f}, pooled, {a['runs']} solver runs, no epistemic loop).",
+                  "", f"| surface | P(reaction given surface), {study.scene.configuration} | "
+                  f"P(reaction given surface), {a['configuration']} |", "|---|---|---|"]
+        for s in r.surfaces:
+            if s.material in a["surfaces"]:
+                lines.append(f"| {s.material} | {s.conditional:.3g} | "
+                             f"{a['surfaces'][s.material]:.3g} |")
+        lines += ["", f"| | {study.scene.configuration} | {a['configuration']} |",
+                  "|---|---|---|",
+                  f"| P per accident (modelled surfaces) | {r.probability:.3g} | "
+                  f"{a['probability']:.3g} |"]
+    if r.angle_scales:
+        lines += ["", "## The angle distribution's scale", "",
+                  "P at other plausible scales of the angle distribution, from the same solver "
+                  "samples reweighted by the ratio of the angle densities f_alt(phi) / f(phi) "
+                  "(no extra solver run; unbiased where the samples cover the alternative, the "
+                  "CoV says how well; the epistemic band likewise from the draws' samples, "
+                  "so it is no better covered than the reweighted P on its row). "
+                  "\"Beyond sampled range\": the alternative's probability of angles beyond "
+                  "the study's 1e-9 quantiles, which no sample reached (an upper bound on what "
+                  "the reweighting misses).", "",
+                  f"Where the reweighted CoV exceeds {RERUN_COV:g} or the range the samples "
+                  f"missed holds more than {RERUN_UNCOVERED:g} P, the samples do not cover the "
+                  "alternative: P is then rerun with fresh samples of it (pooled, at the "
+                  "epistemic draws' target CoV, no epistemic loop; angles beyond "
+                  f"{ANGLE_MAX:g} deg clipped to it) and the rerun is the value to use.", "",
+                  "| angle distribution | P per accident, reweighted | CoV | epistemic 5 % | "
+                  "epistemic 95 % | beyond sampled range | P, rerun [95 % interval] |",
+                  "|---|---|---|---|---|---|---|"]
+        for a in r.angle_scales:
+            label = f"half-normal, scale {a['scale_deg']:g} deg" if a["distribution"].startswith(
+                "halfnorm") and a["scale_deg"] is not None else a["distribution"]
+            label += " (the study's)" if a["study"] else ""
+            rerun = a.get("rerun")
+            again = (f"**{rerun['probability']:.3g}** [{rerun['interval'][0]:.3g}, "
+                     f"{rerun['interval'][1]:.3g}] ({rerun['runs']} runs)" if rerun else
+                     "not needed")
+            lines.append(f"| {label} | {a['probability']:.3g} | {a['cov']:.2f} | "
+                         f"{a['band_low']:.3g} | {a['band_high']:.3g} | {a['uncovered']:.2g} | "
+                         f"{again} |")
+    lines += ["",
               "## Design point: the most likely initiating combination", "",
               f"Surface **{r.design_point['surface']}**; it reacts from a drop of "
               f"{r.design_point['critical_height']:.3g} m or more "
@@ -927,19 +1194,48 @@ def _markdown(r: HazardResult, study: HazardStudy) -> str:
               "| surface | H_c at its design point | ln density (relative) |", "|---|---|---|"]
     top = max(s.design_log_density for s in r.surfaces)
     for s in r.surfaces:
+        if s.regime == "outside":
+            lines.append(f"| {s.material} | outside the model (not run) | - |")
+            continue
         lines.append(f"| {s.material} | {s.design_critical_height:.3g} m | "
                      f"{s.design_log_density - top:+.1f} |")
     f = r.fragility
     lines += ["", "## Fragility: P against the median drop height", "",
               "The same H_c samples reweighted (no extra solver run); the band from the "
-              "epistemic draws' samples.", "",
+              f"epistemic draws' samples: it covers the kinetics inputs only "
+              f"({', '.join(study.epistemic_keys) or 'none'}; "
+              f"{study.estimator.epistemic_draws} draws), every other input averaged within "
+              "each draw.", "",
               "| median drop height | P per accident | CoV | epistemic 5 % | epistemic 95 % |",
               "|---|---|---|---|---|"]
     for m, p, c, a, b in zip(f["median"], f["probability"], f["cov"], f["band_low"],
                              f["band_high"]):
         lines.append(f"| {m:.3g} m | {p:.3g} | {c:.2f} | {a:.3g} | {b:.3g} |")
-    lines += ["", "## Notes", ""]
-    lines += [f"- {n}" for n in r.notes] or ["- none"]
+    lines += ["", "## Assumptions", "",
+              "The study's judgements, as its file states them:", ""]
+    lines += [f"- {a}" for a in study.assumptions] or [
+        "- (the study file lists none: `assumptions = [...]` in [hazard])"]
+    lines += ["", "Every sampled input and its source, as the study file gives it:", "",
+              "| input | distribution (parameters in SI: Pa, K, J/kg, 1/s; angle in deg; "
+              "`x nominal`: a factor on the scene's value) | source |", "|---|---|---|",
+              f"| drop height [m] | {study.drop_height.describe()} | "
+              f"{study.drop_height.source} |",
+              f"| impact angle [deg] | {study.angle.describe()} | {study.angle.source} |"]
+    for surf in study.surfaces:
+        lines.append(f"| friction on {surf.material} | {surf.friction.describe()} | "
+                     f"{surf.friction.source} |")
+    for part, group in (("billet", study.billet), ("epistemic", study.epistemic)):
+        for key, d in group.items():
+            lines.append(f"| `{key}` ({part}) | {d.describe()} | {d.source} |")
+    lines += ["", "| surface | weight | source of the weight |", "|---|---|---|"]
+    lines += [f"| {surf.material} | {surf.weight:g} | {surf.source} |"
+              for surf in study.surfaces]
+    lines += ["", f"Configuration of the headline: {study.scene.configuration}; epistemic "
+              f"draws: {study.estimator.epistemic_draws}; solver tolerance rtol "
+              f"{study.solver.rtol:g} (moves P by about {r.elasticity * study.solver.rtol:.0%}, "
+              "above).", "", "## Run notes", ""]
+    lines += [f"- {n}" for n in r.notes] or ["- none (no failures, every estimate reached "
+                                              "its target CoV)"]
     if r.failure_reasons:
         lines += ["", "Failure reasons:", ""] + [f"- {x}" for x in r.failure_reasons]
     lines += ["", "Figures: `fragility.png`, `importance.png`. Data: `summary.json`, "
@@ -971,9 +1267,10 @@ def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
     c = np.array(f["cov"])
     if np.isfinite(f["band_low"]).all():
         ax.fill_between(m, f["band_low"], f["band_high"], color="C0", alpha=0.2,
-                        label="epistemic 5-95 %")
+                        label=f"5-95 % over {study.estimator.epistemic_draws} kinetics draws "
+                              "(kinetics only)")
     ax.errorbar(m, p, yerr=_Z * c * p, fmt="o-", color="C0", capsize=3,
-                label="pooled, 95 % interval")
+                label="all inputs sampled, 95 % sampling interval")
     ax.axvline(float(study.drop_height.frozen.median()), color="grey", ls=":",
                label="study median")
     ax.set_xscale("log")
@@ -982,7 +1279,10 @@ def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("median drop height [m]")
     ax.set_ylabel("P(reaction) per accident")
-    ax.set_title(f"{r.name}: fragility")
+    outside = [x.material for x in r.surfaces if x.regime == "outside"]
+    ax.set_title(f"{r.name}: fragility" + (f"\n(modelled surfaces; {', '.join(outside)} "
+                                           "outside the model, not in P)" if outside else ""),
+                 fontsize=10)
     ax.legend(fontsize=8)
     fig.tight_layout()
     paths.append(out / "fragility.png")
@@ -993,18 +1293,39 @@ def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
     keys = list(r.importance)
     values = [r.importance[k] for k in keys]
     ax1.barh(range(len(keys)), values, color=["C3" if v > 0 else "C0" for v in values])
-    ax1.set_yticks(range(len(keys)), [k.replace("kinetics.", "k.") for k in keys], fontsize=8)
+    ax1.set_yticks(range(len(keys)), [k.replace("kinetics.", "kinetics: ").replace("_", " ")
+                                      for k in keys], fontsize=8)
     ax1.axvline(0, color="black", lw=0.5)
-    ax1.set_xlabel("E[U | reaction] [standard deviations]")
+    ax1.set_xlabel("mean shift of the input over reactions\n"
+                   "E[U | reaction] [standard deviations from its median]", fontsize=8)
     ax1.invert_yaxis()
+    from matplotlib.patches import Patch
+
+    ax1.legend(handles=[Patch(color="C3", label="reactions need a higher value"),
+                        Patch(color="C0", label="reactions need a lower value")],
+               fontsize=7, loc="best")
     names = [s.material for s in r.surfaces]
     x = np.arange(len(names))
-    ax2.bar(x - 0.2, [s.weight for s in r.surfaces], 0.4, label="share of accidents")
-    ax2.bar(x + 0.2, [s.share / r.probability if r.probability > 0 else 0
-                      for s in r.surfaces], 0.4, label="share of P")
-    ax2.set_xticks(x, names, rotation=30, fontsize=8)
-    ax2.legend(fontsize=8)
-    fig.suptitle(f"{r.name}: what drives a reaction")
+    ax2.bar(x - 0.2, [s.weight for s in r.surfaces], 0.4, color="C7",
+            label="share of accidents")
+    shares = [s.share / r.probability if r.probability > 0 and s.regime != "outside"
+              and s.share > 0 else np.nan for s in r.surfaces]
+    ax2.bar(x + 0.2, shares, 0.4, color="C1", label="share of P")
+    ax2.set_yscale("log")
+    floor = min([v for v in shares if np.isfinite(v)] + [0.01])
+    bottom = max(floor / 3, 1e-16)
+    ax2.set_ylim(bottom, 50.0)  # room above 1 for the legend
+    for k, s in enumerate(r.surfaces):
+        if s.regime == "outside":
+            ax2.text(k + 0.2, math.sqrt(bottom), "outside the model:\nnot in P", rotation=90,
+                     fontsize=7, ha="center", va="center", color="C1")
+    ax2.set_xticks(x, [f"{n}\n({s.regime})" for n, s in zip(names, r.surfaces)], rotation=30,
+                   fontsize=7)
+    ax2.set_xlim(-0.6, len(names) - 0.4)
+    ax2.set_ylabel("fraction (log scale)", fontsize=8)
+    ax2.legend(fontsize=7, loc="upper right", ncol=2)
+    fig.suptitle(f"{r.name}: what drives a reaction (left: inputs, pooled; right: surfaces)",
+                 fontsize=10)
     fig.tight_layout()
     paths.append(out / "importance.png")
     fig.savefig(paths[-1], dpi=100)
