@@ -264,8 +264,15 @@ def _add_run_parser(subparsers) -> None:
                      "refused, naming it")
     run.add_argument("--out", help="result file (.h5) or folder (default: "
                      "results/<study name>/, ensemble.h5 or evaluations.h5)")
-    run.add_argument("--n", type=_positive_int, help="samples per scene (default: the study's; "
-                     "a growing Sobol' study starts at this N)")
+    run.add_argument("--n", type=_positive_int, help="the study's n (default: the study's "
+                     "design.n): samples per scene for mc/lhs/sobol; base samples N for "
+                     "saltelli (N (2d+2) or N (d+2) rows per scene); aleatory samples per "
+                     "epistemic draw on a nested study (n_epistemic x n rows per scene); the "
+                     "first N of a growing Sobol' study; the run's first line says which "
+                     "where it is not samples per scene")
+    run.add_argument("--yes", action="store_true",
+                     help="run a large study (over 2 GB on disk or about 6 h) without asking; "
+                     "without a terminal a large run is refused unless --yes is given")
     run.add_argument("--workers", type=_positive_int,
                      help="parallel workers, >= 1 (default: all CPUs)")
     run.add_argument("--scheduler", metavar="{local,dask,tcp://host:port}",
@@ -298,6 +305,42 @@ def _finish(name: str, outcome) -> int:
     return outcome.status
 
 
+#: A run estimated at this many seconds or bytes or more prints its size before it starts (a
+#: smaller one just runs).
+SIZE_LINE_SECONDS = 10.0
+SIZE_LINE_BYTES = 100 * 1000**2
+
+
+def _n_meaning(study) -> str:
+    """What the study's n is: one line for the run's first line (``--n`` has several
+    meanings)."""
+    d = study.design
+    if d.n_epistemic:
+        return (f"n = {d.n} aleatory samples per epistemic draw, {d.n_epistemic} epistemic "
+                f"draws: {study.n_rows:,} rows per scene")
+    if d.method == "saltelli":
+        return (f"n = {d.n} base samples of the saltelli design: {study.n_rows:,} rows per "
+                "scene")
+    return f"n = {d.n} samples per scene ({d.method})"
+
+
+def _confirm_run(size, args: argparse.Namespace) -> bool:
+    """Print a new run's size (samples, bytes, estimated time) before it starts; a large run
+    needs --yes or a "y" at a terminal (refused without a terminal)."""
+    if (not args.quiet and (size.seconds >= SIZE_LINE_SECONDS or size.bytes >= SIZE_LINE_BYTES)) \
+            or size.large:
+        print(f"skidmc run: {size.describe()}", file=sys.stderr)
+    if not size.large or args.yes:
+        return True
+    if not (sys.stdin.isatty() and sys.stderr.isatty()):
+        return False
+    try:
+        answer = input("skidmc run: a large run; go on? [y/N] ")
+    except EOFError:
+        return False
+    return answer.strip().lower() in ("y", "yes")
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     """``skidmc run``: exit status 0 done (or up to date), 2 invalid study, option or result
     file, 130 interrupted. The kind of study is looked up (:mod:`skidmc.workflows`)."""
@@ -318,10 +361,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
     options = RunOptions(
         out=args.out, n=args.n, resume=args.resume, force=args.force, workers=args.workers,
         scheduler=args.scheduler, quiet=args.quiet, chunk_size=args.chunk_size,
-        command=" ".join(parts), solver=args.solver, study_path=str(args.study))
+        command=" ".join(parts), solver=args.solver, study_path=str(args.study),
+        confirm=lambda size: _confirm_run(size, args))
     try:
         kind, study = load(args.study)
         check_options(kind, options)
+        if getattr(study, "design", None) is not None and hasattr(study, "with_n"):
+            shown = study.with_n(args.n) if args.n is not None else study  # StudyError: bad n
+            if not args.quiet and (shown.design.n_epistemic
+                                   or shown.design.method == "saltelli"):
+                # n is not "samples per scene" there: say what it is
+                print(f"skidmc run: {shown.file}: {_n_meaning(shown)}", file=sys.stderr)
         outcome = get_kind(kind).run(study, options)
     except SkidmcError as exc:  # StudyError, OptionError, StorageError, SchedulerError
         print(f"skidmc run: error: {exc}", file=sys.stderr)

@@ -59,7 +59,7 @@ def run(study, options: RunOptions) -> Outcome:
         options.study_path or study, options.out, n=options.n, workers=options.workers,
         scheduler=options.scheduler, resume=options.resume, force=options.force,
         progress=False if options.quiet else None, chunk_size=options.chunk_size,
-        command=options.command, solver=options.solver)
+        command=options.command, solver=options.solver, confirm=options.confirm)
     lines: list[str] = []
     if not options.quiet:
         if report.action == "up_to_date":

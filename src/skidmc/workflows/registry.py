@@ -111,6 +111,9 @@ class RunOptions:
         The study file as given.
     log : callable
         Receives each progress or summary line (stderr by default).
+    confirm : callable or None
+        Told a new run's size (:class:`skidmc.ensemble.run.RunSize`) before its file is made;
+        returns whether to go on (``skidmc run``: prints it, asks about a large run).
     """
 
     out: str | None = None
@@ -125,6 +128,7 @@ class RunOptions:
     solver: Callable | None = None
     study_path: str | None = None
     log: Callable[[str], None] = _stderr
+    confirm: Callable | None = None
 
     #: The options a user gives (the rest are plumbing), with their command-line spelling.
     USER_OPTIONS = {"out": "--out", "n": "--n", "resume": "--resume", "force": "--force",
