@@ -180,6 +180,14 @@ def _cmd_height(args: argparse.Namespace) -> int:
                 raise SceneError(option, text, "must be > 0")
     if len(bounds) == 2 and not bounds["h_min"] < bounds["h_max"]:
         raise SceneError("--h-max", args.h_max, f"must be above --h-min ({args.h_min})")
+    from skidmc.solver.search import DEFAULT_H_MAX, DEFAULT_H_MIN
+
+    if "h_max" in bounds and "h_min" not in bounds and not DEFAULT_H_MIN < bounds["h_max"]:
+        raise SceneError("--h-max", args.h_max, f"must be above the default lower bound "
+                         f"{DEFAULT_H_MIN:g} m (or give a smaller --h-min)")
+    if "h_min" in bounds and "h_max" not in bounds and not bounds["h_min"] < DEFAULT_H_MAX:
+        raise SceneError("--h-min", args.h_min, f"must be below the default upper bound "
+                         f"{DEFAULT_H_MAX:g} m (or give a larger --h-max)")
 
     critical_height = getattr(args, "solver", None)
     if critical_height is None:
@@ -187,12 +195,16 @@ def _cmd_height(args: argparse.Namespace) -> int:
     result = critical_height(scene, rtol=args.rtol, tier=args.tier, **bounds)
 
     height_m = float(result.critical_height)
+    from skidmc.scene.scenes import implausible_inputs
+
+    implausible = implausible_inputs(scene)
     report = {
         "critical_height_m": height_m,
         "critical_height_ft": from_si(height_m, "m", "ft"),
         "censored": result.censored,
         "evaluations": int(result.evaluations),
         "flags": list(result.flags),
+        "implausible_inputs": list(implausible),
         "wall_time_s": float(result.wall_time),
         "rtol": args.rtol,
         "tier": args.tier,
@@ -203,6 +215,9 @@ def _cmd_height(args: argparse.Namespace) -> int:
     }
     for key, value in result.to_dict().items():  # the solver's diagnostics (error estimate, ...)
         report.setdefault(key, value)
+    for line in implausible:  # taken at its word, but the height may mean nothing
+        print(f"skidmc height: warning: {line}; the model was not made for it and the "
+              "height may mean nothing", file=sys.stderr)
     if args.json:
         print(json.dumps(report, indent=2, default=_json_default))
         return 0
@@ -242,6 +257,8 @@ def _height_text(report: dict, censored: str | None, args: argparse.Namespace,
     flags = report["flags"]
     rows += [("flags" if i == 0 else "", f"{flag}: {FLAG_MEANINGS.get(flag, '(undocumented)')}")
              for i, flag in enumerate(flags)] or [("flags", "none")]
+    rows += [("implausible" if i == 0 else "", line)
+             for i, line in enumerate(report.get("implausible_inputs", ()))]
     rows += [("rtol, tier", f"{args.rtol:g}, {args.tier}"), ("preset", args.preset)]
     rows += [("set", f"{key} = {value}") for key, value in overrides.items()]
     return _table(rows)
@@ -416,6 +433,24 @@ def _unit_interval(text: str) -> float:
     return value
 
 
+def _check_out_folder(out: str) -> None:
+    """Refuse a ``--out`` folder that cannot be made or written (a path through a file, under
+    /proc or /sys, a device), before any work: :class:`SceneError` naming ``--out``."""
+    import os
+    from pathlib import Path
+
+    folder = Path(out)
+    if folder.exists() and not folder.is_dir():
+        raise SceneError("--out", out, "is a file, not a folder: give a folder for the report")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SceneError("--out", out, f"cannot make this folder ({exc.strerror or exc}): "
+                         "give a folder you can write") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise SceneError("--out", out, "is not writable: give a folder you can write")
+
+
 def _cmd_report(args: argparse.Namespace) -> int:
     """``skidmc report``: exit status 0 written, 2 no usable result. The kind of study (of the
     study file, or of the study a result file stores) is looked up (:mod:`skidmc.workflows`)."""
@@ -424,6 +459,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from skidmc.workflows import ReportOptions, check_options, get_kind, kind_of_result, load
 
     target = Path(args.target)
+    if args.out is not None:
+        _check_out_folder(args.out)
     options = ReportOptions(out=args.out, confidence=args.confidence, source=str(args.target))
     if target.suffix == ".toml":
         kind, subject = load(target)
@@ -562,6 +599,38 @@ def _add_plan_parser(subparsers) -> None:
 # --- parser and entry point ----------------------------------------------------------------------
 
 
+#: Options whose value may be a negative number (argparse takes "-1e-3" for an option and
+#: says "expected one argument"): written as ``--opt=-1e-3`` before parsing, so that the
+#: value reaches its check, which says what is wrong with it.
+_NUMERIC_OPTIONS = ("--rtol", "--n", "--workers", "--confidence", "--discrepancy", "--guess",
+                    "--p", "--credibility", "--h-min", "--h-max", "--chunk-size")
+
+
+def _negative_numbers(argv: Sequence[str] | None) -> list[str]:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        item = argv[i]
+        if item in _NUMERIC_OPTIONS and i + 1 < len(argv) and _is_negative(argv[i + 1]):
+            out.append(f"{item}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(item)
+        i += 1
+    return out
+
+
+def _is_negative(text: str) -> bool:
+    if not text.startswith("-"):
+        return False
+    try:
+        float(text.split()[0])
+    except (ValueError, IndexError):
+        return False
+    return True
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``skidmc`` argument parser (subcommands ``presets``, ``materials``, ``height``,
     ``run``)."""
@@ -635,7 +704,7 @@ def main(argv: Sequence[str] | None = None, *, solver=None) -> int:
         Exit status: 0 success, 1 a missing component, 2 invalid input (one line on stderr).
         Usage errors exit with status 2 through :mod:`argparse` (``SystemExit``).
     """
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(_negative_numbers(argv))
     args.solver = solver
     try:
         return args.func(args)
@@ -645,6 +714,18 @@ def main(argv: Sequence[str] | None = None, *, solver=None) -> int:
     except KeyboardInterrupt:
         print("skidmc: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader went away (`skidmc presets | head -1`): end quietly, as `cat` does; stdout
+        # goes to /dev/null so that Python's flush at exit does not complain again.
+        import os
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, the status of a Unix tool stopped by a closed pipe
+    except OSError as exc:  # the file system said no where no check expected it
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"skidmc: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

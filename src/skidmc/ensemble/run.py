@@ -336,6 +336,26 @@ class RunTooLarge(SkidmcError, ValueError):
     confirmed); ``str(err)`` gives its samples, bytes and estimated time."""
 
 
+class BackendUnavailable(SkidmcError, ValueError):
+    """The study's ``solver.backend`` cannot run on this machine (no usable CUDA GPU)."""
+
+
+class AllSamplesFailed(SkidmcError):
+    """Every sample a run evaluated failed; ``str(err)`` counts the reasons."""
+
+
+def failure_counts(reasons) -> str:
+    """``"8 x RuntimeError: boom; 2 x SolverError: ..."``: the distinct reasons, most frequent
+    first (at most 3, the rest counted)."""
+    from collections import Counter
+
+    counts = Counter(str(r) for r in reasons).most_common()
+    shown = "; ".join(f"{n} x {reason[:160]}" for reason, n in counts[:3])
+    if len(counts) > 3:
+        shown += f"; and {len(counts) - 3} other reasons"
+    return shown
+
+
 @dataclasses.dataclass(frozen=True)
 class RunSize:
     """How large a run is, before it starts.
@@ -487,6 +507,15 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
             study = load_study(study)
         if n is not None:
             study = study.with_n(n)
+        if study.solver.backend == "cuda" and solver is None:
+            from skidmc.solver.cuda import cuda_status
+
+            usable, why = cuda_status()
+            if not usable:  # before any file is made
+                raise BackendUnavailable(
+                    f"{study.file}: solver.backend = 'cuda' cannot run here: {why.split(':')[0]}"
+                    "; use backend = 'cpu' (the same kernel on the CPUs) or a machine with a "
+                    "CUDA GPU")
         if study.solver.backend != "cpu" and scheduler in (None, "local") and not use_dask:
             # The GPU backend solves each chunk in one launch: one local process drives the GPU
             # (worker processes would only queue on it).
