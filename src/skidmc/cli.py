@@ -93,6 +93,10 @@ def _scene_inputs(scene) -> dict[str, dict]:
     return {key: {"value": value, "units": SI_UNITS[key]} for key, value in scene.as_dict().items()}
 
 
+#: The flag ``skidmc height`` adds where the solver's error estimate stayed above --rtol.
+RTOL_UNMET = "rtol_unmet"
+
+
 # --- skidmc presets ------------------------------------------------------------------------------
 
 
@@ -215,6 +219,15 @@ def _cmd_height(args: argparse.Namespace) -> int:
     }
     for key, value in result.to_dict().items():  # the solver's diagnostics (error estimate, ...)
         report.setdefault(key, value)
+    error = report.get("error_estimate")
+    if args.tier == "full" and isinstance(error, (int, float)) and math.isfinite(error) \
+            and error > args.rtol * (1 + 1e-9):
+        # the search refined as far as it goes (its finest level) and stopped above rtol
+        report["flags"].append(RTOL_UNMET)
+        report["rtol_unmet"] = {"requested": args.rtol, "achieved_estimate": float(error)}
+        print(f"skidmc height: warning: --rtol {args.rtol:g} was not reached: the finest "
+              f"refinement gave an error estimate of {error:.2g}; ask for --rtol {error:.1g} or "
+              "more", file=sys.stderr)
     for line in implausible:  # taken at its word, but the height may mean nothing
         print(f"skidmc height: warning: {line}; the model was not made for it and the "
               "height may mean nothing", file=sys.stderr)
@@ -255,7 +268,9 @@ def _height_text(report: dict, censored: str | None, args: argparse.Namespace,
         rows += [("evaluations", str(report["evaluations"])),
                  ("wall time", f"{report['wall_time_s']:.3g} s")]
     flags = report["flags"]
-    rows += [("flags" if i == 0 else "", f"{flag}: {FLAG_MEANINGS.get(flag, '(undocumented)')}")
+    meanings = {**FLAG_MEANINGS, RTOL_UNMET: "the requested rtol was not reached (the search "
+                "refined as far as it goes); the error estimate above is what was reached"}
+    rows += [("flags" if i == 0 else "", f"{flag}: {meanings.get(flag, '(undocumented)')}")
              for i, flag in enumerate(flags)] or [("flags", "none")]
     rows += [("implausible" if i == 0 else "", line)
              for i, line in enumerate(report.get("implausible_inputs", ()))]

@@ -240,6 +240,9 @@ def _plan(study: Study, path: Path, resume: bool, force: bool) -> str:
     except StorageError as exc:
         if force and exc.damaged:
             return "replace"
+        if not exc.damaged:  # a foreign file: say what a run does with it
+            raise StorageError(path, f"{exc.reason}; refusing to overwrite it (choose another "
+                               "--out)") from None
         raise
     if not info["skidmc"]:
         raise StorageError(path, "exists and is not a skidmc ensemble file; refusing to "
@@ -495,6 +498,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
     # study and the opening of the file, unless the target file exists already (it may be up to
     # date: then no worker is wanted at all).
     executor, owned, t0 = None, False, None
+    lock = None
     if scheduler in (None, "local") and not use_dask and (workers or default_workers()) > 1 \
             and not _target_exists(study, out):
         executor, owned = _executor(scheduler, use_dask, workers)
@@ -524,6 +528,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                 executor.shutdown()
             executor, owned = None, False
         path = _resolve_out(study, out)
+        lock = _lock_folder(path)
         command = command or f"run_study({study.file!r}, n={study.design.n})"
         report = RunReport(path=path, n_rows=study.n_rows, n_scenes=len(study.scenes),
                            timeline=[] if timeline else None)
@@ -597,7 +602,41 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
             file.close()
         if executor is not None and owned:
             executor.shutdown()
+        if lock is not None:
+            os.close(lock)  # releases the lock
     return report
+
+
+def _lock_folder(path: Path) -> int | None:
+    """Hold the result file's folder for this run (an exclusive ``flock`` on the folder,
+    released when the run ends, also by a kill): a second run into the same folder is refused
+    at once with a clear message instead of an HDF5 lock error or a missing ``.new.tmp``.
+    None where the folder cannot be made or locked (the file's creation then says why)."""
+    import errno
+
+    from skidmc.ensemble.storage import StorageError
+
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not a POSIX system: no lock
+        return None
+
+    folder = path.absolute().parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        os.close(fd)
+        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+            raise StorageError(path, f"another skidmc run holds this output (its folder "
+                               f"{folder} is locked by a run in progress); wait for it to end "
+                               "or choose another --out") from None
+        return None
+    return fd
 
 
 class _Draws:

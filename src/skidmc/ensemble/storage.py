@@ -346,8 +346,7 @@ def inspect_file(path: str | os.PathLike, *, verify: bool = False) -> dict:
             raise StorageError(path, "is an empty file (a truncated result?); delete it, "
                                "replace it with `skidmc run --force` or choose another --out",
                                damaged=True)
-        raise StorageError(path, "exists but is not an HDF5 file: not a skidmc result; "
-                           "refusing to overwrite it (choose another --out)")
+        raise StorageError(path, "exists but is not an HDF5 file: not a skidmc result")
     with _open(path, "r") as f:
         try:
             attrs = dict(f.attrs)

@@ -238,8 +238,25 @@ def kind_of_result(path: str | Path) -> str:
         return "ensemble"
 
 
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
 def load(path: str | Path) -> tuple[str, object]:
-    """The kind of a study file and the study, validated by its kind."""
+    """The kind of a study file and the study, validated by its kind.
+
+    A result file (HDF5) given where a study is wanted is refused saying so (a StudyError),
+    rather than failing to decode it as text."""
+    from skidmc.ensemble.study_model import StudyError
+
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        head = b""  # reading it as a study says why
+    if head == HDF5_SIGNATURE:
+        raise StudyError(str(path), "study", Path(path).name,
+                         "is a result file (HDF5), not a study file (TOML): run the study that "
+                         f"made it, or analyse it with: skidmc report {path}")
     name = kind_of_file(path)
     return name, get_kind(name).load(path)
 
