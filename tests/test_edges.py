@@ -461,3 +461,13 @@ def test_help_says_what_n_means_for_each_kind():
     for words in ("samples per scene for mc/lhs/sobol", "base samples N for saltelli",
                   "aleatory samples per epistemic draw on a nested study"):
         assert words in text
+
+
+def test_yes_is_taken_by_the_kind_that_asks_and_refused_by_the_others():
+    from skidmc.workflows import registry
+    from skidmc.workflows.registry import OptionError, RunOptions
+
+    registry.check_options("ensemble", RunOptions(yes=True))
+    for kind in ("sobol", "hazard"):
+        with pytest.raises(OptionError, match=f"^--yes: not for a {kind} study"):
+            registry.check_options(kind, RunOptions(yes=True))

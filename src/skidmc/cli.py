@@ -304,7 +304,8 @@ def _add_run_parser(subparsers) -> None:
                      "where it is not samples per scene")
     run.add_argument("--yes", action="store_true",
                      help="run a large study (over 2 GB on disk or about 6 h) without asking; "
-                     "without a terminal a large run is refused unless --yes is given")
+                     "without a terminal a large run is refused unless --yes is given (plain "
+                     "ensemble studies; the other kinds refuse --yes)")
     run.add_argument("--workers", type=_positive_int,
                      help="parallel workers, >= 1 (default: all CPUs)")
     run.add_argument("--scheduler", metavar="{local,dask,tcp://host:port}",
@@ -394,7 +395,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         out=args.out, n=args.n, resume=args.resume, force=args.force, workers=args.workers,
         scheduler=args.scheduler, quiet=args.quiet, chunk_size=args.chunk_size,
         command=" ".join(parts), solver=args.solver, study_path=str(args.study),
-        confirm=lambda size: _confirm_run(size, args))
+        confirm=lambda size: _confirm_run(size, args), yes=args.yes)
     try:
         kind, study = load(args.study)
         check_options(kind, options)

@@ -17,7 +17,8 @@ __all__ = ["DESCRIPTION", "REPORT_OPTIONS", "RUN_OPTIONS", "default_out", "detec
            "report", "run"]
 
 DESCRIPTION = "an ensemble of critical heights over a design (mc, lhs, sobol, saltelli)"
-RUN_OPTIONS = frozenset({"out", "n", "resume", "force", "workers", "scheduler", "chunk_size"})
+RUN_OPTIONS = frozenset({"out", "n", "resume", "force", "workers", "scheduler", "chunk_size",
+                         "yes"})
 REPORT_OPTIONS = frozenset({"out", "confidence"})
 
 

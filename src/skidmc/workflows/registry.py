@@ -114,6 +114,8 @@ class RunOptions:
     confirm : callable or None
         Told a new run's size (:class:`skidmc.ensemble.run.RunSize`) before its file is made;
         returns whether to go on (``skidmc run``: prints it, asks about a large run).
+    yes : bool
+        ``--yes``: a large run goes on without asking (the kinds that ask: ensemble).
     """
 
     out: str | None = None
@@ -129,11 +131,12 @@ class RunOptions:
     study_path: str | None = None
     log: Callable[[str], None] = _stderr
     confirm: Callable | None = None
+    yes: bool = False
 
     #: The options a user gives (the rest are plumbing), with their command-line spelling.
     USER_OPTIONS = {"out": "--out", "n": "--n", "resume": "--resume", "force": "--force",
                     "workers": "--workers", "scheduler": "--scheduler",
-                    "chunk_size": "--chunk-size"}
+                    "chunk_size": "--chunk-size", "yes": "--yes"}
 
 
 @dataclasses.dataclass(frozen=True)
