@@ -233,22 +233,48 @@ def test_critical_height_bounds_name_the_bound(bounds, name):
 # --- 3. inputs that pass validation and crash the solver ----------------------------------------
 
 
-def test_a_scene_the_solver_cannot_finish_is_one_line_naming_the_implausible_key():
+def test_kinetics_that_explode_at_rest_are_refused_at_once():
+    # Z = 1e300 1/s: the adiabatic induction time at 294 K is ~1e-265 s (physically
+    # impossible: the HE could not be dropped); it once crashed the solver (math domain error)
     proc = skidmc("height", "--preset", "paper-quartz", "--set",
-                  "kinetics.prefactor=1e300 1/s", timeout=300)
-    refused(proc, "could not finish this scene", "kinetics.prefactor = 1e300 1/s",
-            "plausible")
+                  "kinetics.prefactor=1e300 1/s")
+    refused(proc, "kinetics.prefactor", "explode on its own", "adiabatic induction time")
 
 
-def test_the_api_raises_a_solver_error_with_the_reason():
+def test_the_shipped_presets_are_far_from_exploding_at_rest():
+    from skidmc.scene import PRESETS, get_preset
+    from skidmc.solver.search import MIN_INDUCTION_TIME, adiabatic_induction_time
+
+    # 1e6 x the threshold: the refusal cannot touch a realistic scene
+    assert min(adiabatic_induction_time(get_preset(n)) for n in PRESETS) > 1e6 * \
+        MIN_INDUCTION_TIME
+
+
+@pytest.mark.parametrize("raised", [ValueError("math domain error"),
+                                    OverflowError("math range error")])
+def test_a_crash_inside_the_solver_becomes_a_solver_error_naming_implausible_keys(
+        monkeypatch, raised):
     from skidmc.scene import make_scene
-    from skidmc.solver import SolverError, critical_height
+    from skidmc.solver import SolverError, critical_height, search
     from skidmc.solver.search import SceneUnsolvable
 
-    scene = make_scene({"kinetics.prefactor": "1e300 1/s"}, preset="paper-quartz")
-    with pytest.raises(SceneUnsolvable, match="kinetics.prefactor") as err:
+    def crashes(*args, **kwargs):
+        raise raised
+
+    monkeypatch.setattr(search, "_critical_height", crashes)
+    scene = make_scene({"he.heat_of_fusion": "1e30 J/kg"}, preset="paper-quartz")
+    with pytest.raises(SceneUnsolvable, match=r"he.heat_of_fusion = 1e30 J/kg") as err:
         critical_height(scene)
     assert isinstance(err.value, SolverError)  # a run records it as a failed sample
+    assert type(raised).__name__ in str(err.value)
+
+
+@pytest.mark.slow
+def test_a_scene_the_solver_cannot_finish_is_one_line_naming_the_implausible_key():
+    # he.heat_of_fusion = 1e30 J/kg: the time integration fails (about 20 s to find out)
+    proc = skidmc("height", "--preset", "paper-quartz", "--set",
+                  "he.heat_of_fusion=1e30 J/kg", timeout=300)
+    refused(proc, "could not finish this scene", "he.heat_of_fusion = 1e30 J/kg", "plausible")
 
 
 def test_a_run_whose_samples_all_fail_exits_nonzero_with_the_reasons(tmp_path, capsys):

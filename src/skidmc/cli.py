@@ -368,7 +368,8 @@ def _confirm_run(size, args: argparse.Namespace) -> bool:
     if not (sys.stdin.isatty() and sys.stderr.isatty()):
         return False
     try:
-        answer = input("skidmc run: a large run; go on? [y/N] ")
+        print("skidmc run: a large run; go on? [y/N] ", end="", file=sys.stderr, flush=True)
+        answer = input()  # the prompt on stderr: stdout stays the result's
     except EOFError:
         return False
     return answer.strip().lower() in ("y", "yes")
