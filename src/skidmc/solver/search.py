@@ -143,27 +143,6 @@ DEFAULT_H_MAX = 1e4
 COARSE_GAP = 2.0
 
 
-#: Shortest adiabatic induction time at the initial temperature [s] of an HE that can be
-#: handled at all: below it a scene is refused (:func:`adiabatic_induction_time`).
-MIN_INDUCTION_TIME = 1.0
-
-
-def adiabatic_induction_time(scene) -> float:
-    """Adiabatic induction time of the HE at the initial temperature [s].
-
-    Frank-Kamenetskii's high-activation-energy limit of Eq. (11) without conduction:
-    ``t = c T0^2 / (Q Z (E/R)) exp((E/R) / T0)``; inf without heat of reaction. Computed in
-    logarithms, so that no input overflows it.
-    """
-    q, z = scene.kinetics_heat_of_reaction, scene.kinetics_prefactor
-    ta, t0, c = scene.kinetics_activation_temperature, scene.initial_temperature, \
-        scene.he_heat_capacity
-    if not (q > 0 and z > 0 and ta > 0 and t0 > 0 and c > 0):
-        return math.inf
-    log_t = math.log(c) + 2 * math.log(t0) - math.log(q) - math.log(z) - math.log(ta) + ta / t0
-    return math.exp(min(log_t, 700.0))
-
-
 class SceneUnsolvable(SolverError, SkidmcError):
     """The solver could not finish a scene that passed validation (a time integration that
     cannot proceed, an overflow): ``str(err)`` gives the reason and the scene's inputs outside
@@ -269,14 +248,6 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
     refused = elastic_target_reason(scene)
     if refused is not None:
         raise SceneError("target.hardness", scene.target_hardness, refused)
-    induction = adiabatic_induction_time(scene)
-    if induction < MIN_INDUCTION_TIME:
-        raise SceneError("kinetics.prefactor", scene.kinetics_prefactor,
-                         f"with kinetics.activation_temperature = "
-                         f"{scene.kinetics_activation_temperature:g} K the HE would explode on "
-                         f"its own at initial_temperature = {scene.initial_temperature:g} K "
-                         f"within {induction:.2g} s (adiabatic induction time): physically "
-                         "impossible for a billet that can be dropped")
     if tier == "fast":
         from skidmc.solver.fast import fast_critical_height
 
