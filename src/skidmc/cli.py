@@ -93,6 +93,10 @@ def _scene_inputs(scene) -> dict[str, dict]:
     return {key: {"value": value, "units": SI_UNITS[key]} for key, value in scene.as_dict().items()}
 
 
+#: The flag ``skidmc height`` adds where the solver's error estimate stayed above --rtol.
+RTOL_UNMET = "rtol_unmet"
+
+
 # --- skidmc presets ------------------------------------------------------------------------------
 
 
@@ -180,6 +184,14 @@ def _cmd_height(args: argparse.Namespace) -> int:
                 raise SceneError(option, text, "must be > 0")
     if len(bounds) == 2 and not bounds["h_min"] < bounds["h_max"]:
         raise SceneError("--h-max", args.h_max, f"must be above --h-min ({args.h_min})")
+    from skidmc.solver.search import DEFAULT_H_MAX, DEFAULT_H_MIN
+
+    if "h_max" in bounds and "h_min" not in bounds and not DEFAULT_H_MIN < bounds["h_max"]:
+        raise SceneError("--h-max", args.h_max, f"must be above the default lower bound "
+                         f"{DEFAULT_H_MIN:g} m (or give a smaller --h-min)")
+    if "h_min" in bounds and "h_max" not in bounds and not bounds["h_min"] < DEFAULT_H_MAX:
+        raise SceneError("--h-min", args.h_min, f"must be below the default upper bound "
+                         f"{DEFAULT_H_MAX:g} m (or give a larger --h-max)")
 
     critical_height = getattr(args, "solver", None)
     if critical_height is None:
@@ -187,12 +199,16 @@ def _cmd_height(args: argparse.Namespace) -> int:
     result = critical_height(scene, rtol=args.rtol, tier=args.tier, **bounds)
 
     height_m = float(result.critical_height)
+    from skidmc.scene.scenes import implausible_inputs
+
+    implausible = implausible_inputs(scene)
     report = {
         "critical_height_m": height_m,
         "critical_height_ft": from_si(height_m, "m", "ft"),
         "censored": result.censored,
         "evaluations": int(result.evaluations),
         "flags": list(result.flags),
+        "implausible_inputs": list(implausible),
         "wall_time_s": float(result.wall_time),
         "rtol": args.rtol,
         "tier": args.tier,
@@ -203,6 +219,18 @@ def _cmd_height(args: argparse.Namespace) -> int:
     }
     for key, value in result.to_dict().items():  # the solver's diagnostics (error estimate, ...)
         report.setdefault(key, value)
+    error = report.get("error_estimate")
+    if args.tier == "full" and isinstance(error, (int, float)) and math.isfinite(error) \
+            and error > args.rtol * (1 + 1e-9):
+        # the search refined as far as it goes (its finest level) and stopped above rtol
+        report["flags"].append(RTOL_UNMET)
+        report["rtol_unmet"] = {"requested": args.rtol, "achieved_estimate": float(error)}
+        print(f"skidmc height: warning: --rtol {args.rtol:g} was not reached: the finest "
+              f"refinement gave an error estimate of {error:.2g}; ask for --rtol {error:.1g} or "
+              "more", file=sys.stderr)
+    for line in implausible:  # taken at its word, but the height may mean nothing
+        print(f"skidmc height: warning: {line}; the model was not made for it and the "
+              "height may mean nothing", file=sys.stderr)
     if args.json:
         print(json.dumps(report, indent=2, default=_json_default))
         return 0
@@ -240,8 +268,12 @@ def _height_text(report: dict, censored: str | None, args: argparse.Namespace,
         rows += [("evaluations", str(report["evaluations"])),
                  ("wall time", f"{report['wall_time_s']:.3g} s")]
     flags = report["flags"]
-    rows += [("flags" if i == 0 else "", f"{flag}: {FLAG_MEANINGS.get(flag, '(undocumented)')}")
+    meanings = {**FLAG_MEANINGS, RTOL_UNMET: "the requested rtol was not reached (the search "
+                "refined as far as it goes); the error estimate above is what was reached"}
+    rows += [("flags" if i == 0 else "", f"{flag}: {meanings.get(flag, '(undocumented)')}")
              for i, flag in enumerate(flags)] or [("flags", "none")]
+    rows += [("implausible" if i == 0 else "", line)
+             for i, line in enumerate(report.get("implausible_inputs", ()))]
     rows += [("rtol, tier", f"{args.rtol:g}, {args.tier}"), ("preset", args.preset)]
     rows += [("set", f"{key} = {value}") for key, value in overrides.items()]
     return _table(rows)
@@ -264,8 +296,16 @@ def _add_run_parser(subparsers) -> None:
                      "refused, naming it")
     run.add_argument("--out", help="result file (.h5) or folder (default: "
                      "results/<study name>/, ensemble.h5 or evaluations.h5)")
-    run.add_argument("--n", type=_positive_int, help="samples per scene (default: the study's; "
-                     "a growing Sobol' study starts at this N)")
+    run.add_argument("--n", type=_positive_int, help="the study's n (default: the study's "
+                     "design.n): samples per scene for mc/lhs/sobol; base samples N for "
+                     "saltelli (N (2d+2) or N (d+2) rows per scene); aleatory samples per "
+                     "epistemic draw on a nested study (n_epistemic x n rows per scene); the "
+                     "first N of a growing Sobol' study; the run's first line says which "
+                     "where it is not samples per scene")
+    run.add_argument("--yes", action="store_true",
+                     help="run a large study (over 2 GB on disk or about 6 h) without asking; "
+                     "without a terminal a large run is refused unless --yes is given (plain "
+                     "ensemble studies; the other kinds refuse --yes)")
     run.add_argument("--workers", type=_positive_int,
                      help="parallel workers, >= 1 (default: all CPUs)")
     run.add_argument("--scheduler", metavar="{local,dask,tcp://host:port}",
@@ -298,6 +338,43 @@ def _finish(name: str, outcome) -> int:
     return outcome.status
 
 
+#: A run estimated at this many seconds or bytes or more prints its size before it starts (a
+#: smaller one just runs).
+SIZE_LINE_SECONDS = 10.0
+SIZE_LINE_BYTES = 100 * 1000**2
+
+
+def _n_meaning(study) -> str:
+    """What the study's n is: one line for the run's first line (``--n`` has several
+    meanings)."""
+    d = study.design
+    if d.n_epistemic:
+        return (f"n = {d.n} aleatory samples per epistemic draw, {d.n_epistemic} epistemic "
+                f"draws: {study.n_rows:,} rows per scene")
+    if d.method == "saltelli":
+        return (f"n = {d.n} base samples of the saltelli design: {study.n_rows:,} rows per "
+                "scene")
+    return f"n = {d.n} samples per scene ({d.method})"
+
+
+def _confirm_run(size, args: argparse.Namespace) -> bool:
+    """Print a new run's size (samples, bytes, estimated time) before it starts; a large run
+    needs --yes or a "y" at a terminal (refused without a terminal)."""
+    if (not args.quiet and (size.seconds >= SIZE_LINE_SECONDS or size.bytes >= SIZE_LINE_BYTES)) \
+            or size.large:
+        print(f"skidmc run: {size.describe()}", file=sys.stderr)
+    if not size.large or args.yes:
+        return True
+    if not (sys.stdin.isatty() and sys.stderr.isatty()):
+        return False
+    try:
+        print("skidmc run: a large run; go on? [y/N] ", end="", file=sys.stderr, flush=True)
+        answer = input()  # the prompt on stderr: stdout stays the result's
+    except EOFError:
+        return False
+    return answer.strip().lower() in ("y", "yes")
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     """``skidmc run``: exit status 0 done (or up to date), 2 invalid study, option or result
     file, 130 interrupted. The kind of study is looked up (:mod:`skidmc.workflows`)."""
@@ -318,10 +395,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
     options = RunOptions(
         out=args.out, n=args.n, resume=args.resume, force=args.force, workers=args.workers,
         scheduler=args.scheduler, quiet=args.quiet, chunk_size=args.chunk_size,
-        command=" ".join(parts), solver=args.solver, study_path=str(args.study))
+        command=" ".join(parts), solver=args.solver, study_path=str(args.study),
+        confirm=lambda size: _confirm_run(size, args), yes=args.yes)
     try:
         kind, study = load(args.study)
         check_options(kind, options)
+        if getattr(study, "design", None) is not None and hasattr(study, "with_n"):
+            shown = study.with_n(args.n) if args.n is not None else study  # StudyError: bad n
+            if not args.quiet and (shown.design.n_epistemic
+                                   or shown.design.method == "saltelli"):
+                # n is not "samples per scene" there: say what it is
+                print(f"skidmc run: {shown.file}: {_n_meaning(shown)}", file=sys.stderr)
         outcome = get_kind(kind).run(study, options)
     except SkidmcError as exc:  # StudyError, OptionError, StorageError, SchedulerError
         print(f"skidmc run: error: {exc}", file=sys.stderr)
@@ -366,6 +450,24 @@ def _unit_interval(text: str) -> float:
     return value
 
 
+def _check_out_folder(out: str) -> None:
+    """Refuse a ``--out`` folder that cannot be made or written (a path through a file, under
+    /proc or /sys, a device), before any work: :class:`SceneError` naming ``--out``."""
+    import os
+    from pathlib import Path
+
+    folder = Path(out)
+    if folder.exists() and not folder.is_dir():
+        raise SceneError("--out", out, "is a file, not a folder: give a folder for the report")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SceneError("--out", out, f"cannot make this folder ({exc.strerror or exc}): "
+                         "give a folder you can write") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise SceneError("--out", out, "is not writable: give a folder you can write")
+
+
 def _cmd_report(args: argparse.Namespace) -> int:
     """``skidmc report``: exit status 0 written, 2 no usable result. The kind of study (of the
     study file, or of the study a result file stores) is looked up (:mod:`skidmc.workflows`)."""
@@ -374,6 +476,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
     from skidmc.workflows import ReportOptions, check_options, get_kind, kind_of_result, load
 
     target = Path(args.target)
+    if args.out is not None:
+        _check_out_folder(args.out)
     options = ReportOptions(out=args.out, confidence=args.confidence, source=str(args.target))
     if target.suffix == ".toml":
         kind, subject = load(target)
@@ -512,6 +616,38 @@ def _add_plan_parser(subparsers) -> None:
 # --- parser and entry point ----------------------------------------------------------------------
 
 
+#: Options whose value may be a negative number (argparse takes "-1e-3" for an option and
+#: says "expected one argument"): written as ``--opt=-1e-3`` before parsing, so that the
+#: value reaches its check, which says what is wrong with it.
+_NUMERIC_OPTIONS = ("--rtol", "--n", "--workers", "--confidence", "--discrepancy", "--guess",
+                    "--p", "--credibility", "--h-min", "--h-max", "--chunk-size")
+
+
+def _negative_numbers(argv: Sequence[str] | None) -> list[str]:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        item = argv[i]
+        if item in _NUMERIC_OPTIONS and i + 1 < len(argv) and _is_negative(argv[i + 1]):
+            out.append(f"{item}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(item)
+        i += 1
+    return out
+
+
+def _is_negative(text: str) -> bool:
+    if not text.startswith("-"):
+        return False
+    try:
+        float(text.split()[0])
+    except (ValueError, IndexError):
+        return False
+    return True
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``skidmc`` argument parser (subcommands ``presets``, ``materials``, ``height``,
     ``run``)."""
@@ -585,7 +721,7 @@ def main(argv: Sequence[str] | None = None, *, solver=None) -> int:
         Exit status: 0 success, 1 a missing component, 2 invalid input (one line on stderr).
         Usage errors exit with status 2 through :mod:`argparse` (``SystemExit``).
     """
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(_negative_numbers(argv))
     args.solver = solver
     try:
         return args.func(args)
@@ -595,6 +731,18 @@ def main(argv: Sequence[str] | None = None, *, solver=None) -> int:
     except KeyboardInterrupt:
         print("skidmc: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader went away (`skidmc presets | head -1`): end quietly, as `cat` does; stdout
+        # goes to /dev/null so that Python's flush at exit does not complain again.
+        import os
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, the status of a Unix tool stopped by a closed pipe
+    except OSError as exc:  # the file system said no where no check expected it
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"skidmc: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import os
 import re
 import signal
 import sys
+import threading
 import time
 from collections.abc import Callable, Mapping
 
@@ -179,14 +180,48 @@ def failed_results(chunk: Chunk, reason: str) -> list[BatchResult]:
     return out
 
 
-def _warm_worker(warm_up: dict | None) -> None:
+#: How often a local worker checks that the process that started it is alive [s].
+PARENT_POLL_SECONDS = 0.5
+
+
+def _alive(pid: int) -> bool:
+    """Whether process `pid` exists and is not a zombie (killed, not yet reaped)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - someone else's process of that id
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            state = f.read().rsplit(b")", 1)[1].split()[0]
+        return state not in (b"Z", b"X")
+    except (OSError, IndexError):  # no /proc (not Linux): os.kill said it exists
+        return True
+
+
+def _watch_parent(parent: int) -> None:
+    """End this worker (``os._exit``) once `parent` is gone: a run killed with SIGKILL gets no
+    chance to stop its workers, and a worker's own parent is the forkserver, not the run, so
+    ``prctl(PR_SET_PDEATHSIG)`` would not see the run die."""
+    while _alive(parent):
+        time.sleep(PARENT_POLL_SECONDS)
+    os._exit(1)
+
+
+def _warm_worker(warm_up: dict | None, parent: int | None = None) -> None:
     """Initializer of a local worker: import the solver, load its compiled kernels once.
 
     A small solve (paper-quartz at the given options) makes numba load the kernels from its
     cache (or compile them) now rather than in the first sample; its result is discarded, and
-    nothing it does can fail the worker. The worker ignores SIGINT (module docstring).
+    nothing it does can fail the worker. The worker ignores SIGINT (module docstring). With
+    `parent` (the process id of the run), a daemon thread ends the worker when that process is
+    gone (:func:`_watch_parent`).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if parent is not None:
+        threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                         name="skidmc-parent-watch").start()
     try:
         from skidmc.solver import critical_height
 
@@ -250,7 +285,8 @@ class ProcessExecutor:
 
     def _new(self):
         pool = cf.ProcessPoolExecutor(self.workers, mp_context=_mp_context(),
-                                      initializer=_warm_worker, initargs=(_WARM_UP,))
+                                      initializer=_warm_worker,
+                                      initargs=(_WARM_UP, os.getpid()))
         # Start every worker now (the pool would start them one per submitted task), so that
         # they import and warm up while the caller prepares its first chunks.
         for _ in range(self.workers):

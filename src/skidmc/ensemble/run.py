@@ -78,6 +78,7 @@ from skidmc.ensemble.executors import (
     default_workers,
 )
 from skidmc.ensemble.schedule import Schedule, run_chunks
+from skidmc.errors import SkidmcError
 from skidmc.scene import SI_UNITS
 
 if TYPE_CHECKING:
@@ -239,6 +240,9 @@ def _plan(study: Study, path: Path, resume: bool, force: bool) -> str:
     except StorageError as exc:
         if force and exc.damaged:
             return "replace"
+        if not exc.damaged:  # a foreign file: say what a run does with it
+            raise StorageError(path, f"{exc.reason}; refusing to overwrite it (choose another "
+                               "--out)") from None
         raise
     if not info["skidmc"]:
         raise StorageError(path, "exists and is not a skidmc ensemble file; refusing to "
@@ -315,6 +319,138 @@ class RunInterrupted(KeyboardInterrupt):
         super().__init__(hint)
 
 
+#: Scene evaluations per second of one worker at the default rtol, as measured by
+#: ``benchmarks/throughput.py`` (results/benchmarks/throughput.md: 350-380/s in process at
+#: rtol 1e-2 on the 2-CPU development machine); only for the estimated time printed before a
+#: run and asked about (:func:`run_size`), never for a result.
+EVALUATIONS_PER_SECOND_PER_WORKER = 300.0
+
+#: A run above this many bytes on disk or this many seconds (estimated) needs a confirmation
+#: (``skidmc run --yes``, or an answer at a terminal).
+LARGE_RUN_BYTES = 2 * 1024**3
+LARGE_RUN_SECONDS = 6 * 3600.0
+
+#: Disk space a run leaves free, beyond its file [bytes] (HDF5 metadata, the compacted copy).
+DISK_MARGIN_BYTES = 64 * 1024**2
+
+
+class RunTooLarge(SkidmcError, ValueError):
+    """A run refused for its size (it cannot fit the free disk, or a large run was not
+    confirmed); ``str(err)`` gives its samples, bytes and estimated time."""
+
+
+class BackendUnavailable(SkidmcError, ValueError):
+    """The study's ``solver.backend`` cannot run on this machine (no usable CUDA GPU)."""
+
+
+class AllSamplesFailed(SkidmcError):
+    """Every sample a run evaluated failed; ``str(err)`` counts the reasons."""
+
+
+def failure_counts(reasons) -> str:
+    """``"8 x RuntimeError: boom; 2 x SolverError: ..."``: the distinct reasons, most frequent
+    first (at most 3, the rest counted)."""
+    from collections import Counter
+
+    counts = Counter(str(r) for r in reasons).most_common()
+    shown = "; ".join(f"{n} x {reason[:160]}" for reason, n in counts[:3])
+    if len(counts) > 3:
+        shown += f"; and {len(counts) - 3} other reasons"
+    return shown
+
+
+@dataclasses.dataclass(frozen=True)
+class RunSize:
+    """How large a run is, before it starts.
+
+    Attributes
+    ----------
+    n_rows, n_scenes : int
+        Samples per scene, scenes.
+    bytes : int
+        Size of the result file [bytes] (allocated in full when it is created).
+    seconds : float
+        Estimated wall time [s] at :data:`EVALUATIONS_PER_SECOND_PER_WORKER` per worker.
+    free_bytes : int
+        Free space of the disk that holds the result file [bytes].
+    workers : int
+    """
+
+    n_rows: int
+    n_scenes: int
+    bytes: int
+    seconds: float
+    free_bytes: int
+    workers: int
+
+    @property
+    def evaluations(self) -> int:
+        return self.n_rows * self.n_scenes
+
+    @property
+    def large(self) -> bool:
+        return self.bytes > LARGE_RUN_BYTES or self.seconds > LARGE_RUN_SECONDS
+
+    def describe(self) -> str:
+        return (f"{self.n_rows:,} samples x {self.n_scenes} scenes = {self.evaluations:,} "
+                f"evaluations, a result file of {_bytes(self.bytes)}, about "
+                f"{_duration(self.seconds)} on {self.workers} workers")
+
+
+def _bytes(n: float) -> str:
+    for unit in ("B", "KB", "MB", "GB", "TB", "PB"):
+        if abs(n) < 1000 or unit == "PB":
+            return f"{n:.3g} {unit}"
+        n /= 1000
+    return f"{n:.3g} PB"  # pragma: no cover
+
+
+def _duration(seconds: float) -> str:
+    for unit, length in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
+        if seconds >= length:
+            return f"{seconds / length:.3g} {unit}"
+    return f"{seconds:.2g} s"
+
+
+def run_size(study: Study, path: Path, workers: int | None = None) -> RunSize:
+    """The size of a run of `study` into `path` (see :class:`RunSize`), from the file's
+    layout (:func:`skidmc.ensemble.storage.estimated_bytes`) and the recorded rate."""
+    import shutil
+
+    from skidmc.ensemble.storage import estimated_bytes
+
+    slots = workers or default_workers()
+    if study.solver.backend != "cpu":
+        slots = 1
+    where = Path(path).absolute().parent
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    try:
+        free = shutil.disk_usage(where).free
+    except OSError:
+        free = -1
+    seconds = study.n_rows * len(study.scenes) / (EVALUATIONS_PER_SECOND_PER_WORKER * slots)
+    return RunSize(study.n_rows, len(study.scenes), estimated_bytes(study), seconds, free, slots)
+
+
+def check_size(size: RunSize, path: Path, confirm: Callable[[RunSize], bool] | None) -> None:
+    """Refuse a run that cannot fit the free disk; then ask `confirm` (it is told the size,
+    and answers whether to go on; :attr:`RunSize.large` says whether to ask a person).
+
+    Raises
+    ------
+    RunTooLarge
+        The file would not fit the free disk, or `confirm` said no to a large run.
+    """
+    if size.free_bytes >= 0 and size.bytes + DISK_MARGIN_BYTES > size.free_bytes:
+        raise RunTooLarge(f"{path}: the run cannot fit the free disk: {size.describe()}, but "
+                          f"only {_bytes(size.free_bytes)} free; lower --n (or n in the "
+                          "study) or choose another --out")
+    if confirm is not None and not confirm(size):
+        raise RunTooLarge(f"{path}: the run was not confirmed: {size.describe()}; run it "
+                          "with --yes, or lower --n (or n in the study)")
+
+
 def _interrupted_hint(path: Path, file_path: Path, action: str, done: int, n_rows: int,
                       removed: bool) -> str:
     if removed:
@@ -329,12 +465,17 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                   workers: int | None = None, scheduler=None, use_dask: bool = False,
                   resume: bool = False, force: bool = False, progress: bool | None = None,
                   chunk_size: int | None = None, command: str | None = None,
-                  timeline: bool = False, solver: Callable | None = None) -> RunReport:
+                  timeline: bool = False, solver: Callable | None = None,
+                  confirm: Callable[[RunSize], bool] | None = None) -> RunReport:
     """Run a study to its result file; like :func:`run_study` but returns a :class:`RunReport`.
 
     See :func:`run_study` for the parameters; in addition `chunk_size` sets the samples per chunk
     (default: sized by time, see the module docstring), `command` is the command line recorded
-    in the file's history, and `timeline` records per-chunk timings in the report.
+    in the file's history, and `timeline` records per-chunk timings in the report. Before a
+    file is created, the run's size (:func:`run_size`) is checked: a run that cannot fit the free
+    disk is refused (:class:`RunTooLarge`); then `confirm`, given the :class:`RunSize`, decides
+    (the CLI prints the size and asks about a large run, :data:`LARGE_RUN_BYTES`,
+    :data:`LARGE_RUN_SECONDS`); without `confirm` it runs.
 
     Raises
     ------
@@ -357,6 +498,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
     # study and the opening of the file, unless the target file exists already (it may be up to
     # date: then no worker is wanted at all).
     executor, owned, t0 = None, False, None
+    lock = None
     if scheduler in (None, "local") and not use_dask and (workers or default_workers()) > 1 \
             and not _target_exists(study, out):
         executor, owned = _executor(scheduler, use_dask, workers)
@@ -369,6 +511,15 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
             study = load_study(study)
         if n is not None:
             study = study.with_n(n)
+        if study.solver.backend == "cuda" and solver is None:
+            from skidmc.solver.cuda import cuda_status
+
+            usable, why = cuda_status()
+            if not usable:  # before any file is made
+                raise BackendUnavailable(
+                    f"{study.file}: solver.backend = 'cuda' cannot run here: {why.split(':')[0]}"
+                    "; use backend = 'cpu' (the same kernel on the CPUs) or a machine with a "
+                    "CUDA GPU")
         if study.solver.backend != "cpu" and scheduler in (None, "local") and not use_dask:
             # The GPU backend solves each chunk in one launch: one local process drives the GPU
             # (worker processes would only queue on it).
@@ -377,6 +528,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                 executor.shutdown()
             executor, owned = None, False
         path = _resolve_out(study, out)
+        lock = _lock_folder(path)
         command = command or f"run_study({study.file!r}, n={study.design.n})"
         report = RunReport(path=path, n_rows=study.n_rows, n_scenes=len(study.scenes),
                            timeline=[] if timeline else None)
@@ -394,6 +546,8 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
             executor, owned = _executor(scheduler, use_dask, workers)
         work = path.with_name(path.name + ".new")  # --force: the new file until complete
         created = action == "new" or (action == "replace" and not work.exists())
+        if created:
+            check_size(run_size(study, path, workers), path, confirm)
         file = _open_result_file(study, path, action, work)
         todo = ~file.done()
         try:
@@ -448,7 +602,41 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
             file.close()
         if executor is not None and owned:
             executor.shutdown()
+        if lock is not None:
+            os.close(lock)  # releases the lock
     return report
+
+
+def _lock_folder(path: Path) -> int | None:
+    """Hold the result file's folder for this run (an exclusive ``flock`` on the folder,
+    released when the run ends, also by a kill): a second run into the same folder is refused
+    at once with a clear message instead of an HDF5 lock error or a missing ``.new.tmp``.
+    None where the folder cannot be made or locked (the file's creation then says why)."""
+    import errno
+
+    from skidmc.ensemble.storage import StorageError
+
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not a POSIX system: no lock
+        return None
+
+    folder = path.absolute().parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        os.close(fd)
+        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+            raise StorageError(path, f"another skidmc run holds this output (its folder "
+                               f"{folder} is locked by a run in progress); wait for it to end "
+                               "or choose another --out") from None
+        return None
+    return fd
 
 
 class _Draws:

@@ -346,8 +346,7 @@ def inspect_file(path: str | os.PathLike, *, verify: bool = False) -> dict:
             raise StorageError(path, "is an empty file (a truncated result?); delete it, "
                                "replace it with `skidmc run --force` or choose another --out",
                                damaged=True)
-        raise StorageError(path, "exists but is not an HDF5 file: not a skidmc result; "
-                           "refusing to overwrite it (choose another --out)")
+        raise StorageError(path, "exists but is not an HDF5 file: not a skidmc result")
     with _open(path, "r") as f:
         try:
             attrs = dict(f.attrs)
@@ -427,11 +426,13 @@ class EnsembleFile:
                 _write_skeleton(f, study, {**_global_attrs(study, history),
                                            **dict(attrs or {})})
             os.replace(tmp, path)
-        except OSError as exc:
+        except BaseException as exc:  # also Ctrl-C: an interrupted create leaves no .tmp
             try:
                 tmp.unlink(missing_ok=True)
             except OSError:  # nowhere to have made it (a path through a file)
                 pass
+            if not isinstance(exc, OSError):
+                raise
             raise StorageError(path, f"cannot create the result file: {_os_reason(path, exc)}") \
                 from None
         return cls(path, _open(path, "r+"), study)
@@ -548,6 +549,16 @@ def _os_reason(path: Path, exc: OSError) -> str:
 
 def _sample_bytes(spec: VariableSpec) -> int:
     return spec.width if spec.dtype == "str" else np.dtype(spec.dtype).itemsize
+
+
+def estimated_bytes(study: Study) -> int:
+    """Size [bytes] of a study's result file as created (every variable allocated at once):
+    the per-sample bytes of every variable times the samples, without the small metadata."""
+    n, lead = study.n_rows, len(study.scenes) if study.scene_dimension else 1
+    per_sample = sum(_sample_bytes(spec) for spec in ensemble_variables(study))
+    # sample, done, the per-scene variables; x 1.06: page alignment, checksums and metadata
+    # (measured: paper-series1 at n = 4096 creates 441 MB against 418 MB of data)
+    return int(1.06 * n * (8 + 1 + lead * per_sample))
 
 
 def _chunk_bytes(study: Study) -> list[int]:

@@ -42,6 +42,7 @@ from skidmc.scene.keys import (
     between_keys_ok,
     bound_reason,
     first_broken_between,
+    format_number,
     implausible_reason,
     in_bounds,
 )
@@ -58,6 +59,7 @@ __all__ = [
     "Scene",
     "SceneColumns",
     "get_preset",
+    "implausible_inputs",
     "list_presets",
     "make_scene",
 ]
@@ -461,6 +463,30 @@ class SceneColumns:
         scene = object.__new__(Scene)
         scene.__dict__.update(fields)
         return scene
+
+
+def implausible_inputs(scene: Scene) -> tuple[str, ...]:
+    """The scene's values outside their key's plausible range (:attr:`InputKey.plausible`),
+    one line each: ``"flow_stress = 6.9e18 Pa is outside the plausible 1e5-1e10 Pa"``.
+
+    A bare number outside that range is refused by :func:`make_scene` (it is likely in another
+    unit); a value written with units is taken at its word but flagged with this: the model was
+    never meant for it, and its critical height may mean nothing. Only the allowed interval
+    (:attr:`InputKey.bounds`: a negative density, an angle of 90 deg) is physically impossible
+    and refused.
+    """
+    out = []
+    for ik in INPUT_KEYS:
+        if ik.plausible is None:
+            continue
+        value = getattr(scene, ik.field)
+        lo, hi = ik.plausible
+        if isinstance(value, (int, float)) and value != 0 and math.isfinite(value) \
+                and not lo <= value <= hi:
+            unit = "" if ik.si_unit in ("1", "-") else f" {ik.si_unit}"
+            out.append(f"{ik.key} = {format_number(value)}{unit} is outside the plausible "
+                       f"{format_number(lo)}-{format_number(hi)}{unit}")
+    return tuple(out)
 
 
 def list_presets() -> list[str]:

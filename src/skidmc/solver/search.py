@@ -19,9 +19,10 @@ acted yet. The report's own method, geometric bisection on go/no-go, is kept as
 import dataclasses
 import functools
 import math
+import numbers
 import time
 
-from skidmc.errors import SceneError
+from skidmc.errors import SceneError, SkidmcError
 from skidmc.physics.mechanics import (
     EXIT_STOPS_SLIDING,
     contact_pressure,
@@ -29,6 +30,7 @@ from skidmc.physics.mechanics import (
     sliding_velocity,
 )
 from skidmc.physics.thermal import MELT_SPREAD
+from skidmc.scene.scenes import Scene
 from skidmc.solver.model import build_model, elastic_target_reason, melt_width_floor
 from skidmc.solver.plan import (
     EXACT_FINE_SHIFT,
@@ -63,13 +65,13 @@ from skidmc.solver.roots import (
     margin_slope,
     prior_bisection_root,
 )
-from skidmc.solver.simulate import LinearPrefix, simulate
+from skidmc.solver.simulate import LinearPrefix, SolverError, simulate
 
 __all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "FADING_EXIT_SPEED",
            "FADING_FAST_SHIFT", "FADING_FAST_SPREAD", "FAST_STOPS_SLIDING_SPREAD",
            "FINE_SHIFT_SPREAD",
            "MAX_ADAPTIVE_ROUNDS",
-           "MELT_SHIFT_FACTOR", "TARGETS", "TIERS", "critical_height"]
+           "MELT_SHIFT_FACTOR", "TARGETS", "TIERS", "SceneUnsolvable", "critical_height"]
 
 #: Most corrections (tightened roots, a narrower melting width, a finer pair) the default
 #: search applies to its first Richardson pair before it reports the estimate it reached.
@@ -141,7 +143,33 @@ DEFAULT_H_MAX = 1e4
 COARSE_GAP = 2.0
 
 
+class SceneUnsolvable(SolverError, SkidmcError):
+    """The solver could not finish a scene that passed validation (a time integration that
+    cannot proceed, an overflow): ``str(err)`` gives the reason and the scene's inputs outside
+    their plausible range (:func:`skidmc.scene.scenes.implausible_inputs`), the likely cause.
+    A :class:`SolverError`, so that a run records it as a failed sample with this reason."""
+
+    def __init__(self, scene, exc: BaseException) -> None:
+        from skidmc.scene.scenes import implausible_inputs
+
+        odd = implausible_inputs(scene) if isinstance(scene, Scene) else ()
+        why = f"{type(exc).__name__}: {exc}"
+        hint = ("; inputs outside their plausible range: " + "; ".join(odd)) if odd else ""
+        super().__init__(f"the solver could not finish this scene ({why}){hint}")
+        self.cause, self.implausible = why, odd
+
+
 def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
+                    **kwargs):
+    try:
+        return _critical_height(scene, rtol, tier, h_min, h_max, **kwargs)
+    except (SolverError, ArithmeticError, ValueError) as exc:
+        if isinstance(exc, (SkidmcError, TypeError)):  # argument errors name their argument
+            raise
+        raise SceneUnsolvable(scene, exc) from exc
+
+
+def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
                     *, method="brent", level=None, extrapolate=None, melting=True,
                     runaway_fraction=None, h_guess=None, model=None, melt_width=None,
                     melt_spread=None, target=None):
@@ -203,10 +231,20 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     HeightResult
     """
     start = time.perf_counter()
+    if model is None and not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected a skidmc.scene.Scene (skidmc.scene.make_scene or "
+                        f"get_preset), got {type(scene).__name__} {scene!r:.60}")
     if tier not in TIERS:
         raise SceneError("tier", tier, f"unknown tier (expected one of {', '.join(TIERS)})")
-    if not (0.0 < h_min < h_max):
-        raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
+    for name, bound in (("h_min", h_min), ("h_max", h_max)):
+        if isinstance(bound, bool) or not isinstance(bound, numbers.Real) \
+                or not 0.0 < bound < math.inf:
+            raise SceneError(name, bound, "must be a finite number > 0 [m]")
+    if not h_min < h_max:
+        # name the bound that was moved: the other one is (likely) the default
+        name, value = (("h_max", h_max) if h_min == DEFAULT_H_MIN else ("h_min", h_min))
+        raise SceneError(name, value, f"need h_min < h_max [m] (h_min = {h_min!r}, "
+                         f"h_max = {h_max!r})")
     refused = elastic_target_reason(scene)
     if refused is not None:
         raise SceneError("target.hardness", scene.target_hardness, refused)
@@ -271,6 +309,14 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
     res.evaluations = coarse.evaluations + fine.evaluations
     res.wall_time = time.perf_counter() - start
     return res
+
+
+critical_height.__doc__ = _critical_height.__doc__.replace(
+    "    Returns\n",
+    "    A failure of the solver on a valid scene raises :class:`SceneUnsolvable` (a\n"
+    "    :class:`SolverError` naming the inputs outside their plausible range).\n\n"
+    "    Returns\n", 1)
+critical_height.__wrapped__ = _critical_height  # inspect.signature: the full signature
 
 
 def _fine_search(scene, rtol, level, x_tol, coarse, coarse_tol, common, signs):

@@ -17,7 +17,8 @@ __all__ = ["DESCRIPTION", "REPORT_OPTIONS", "RUN_OPTIONS", "default_out", "detec
            "report", "run"]
 
 DESCRIPTION = "an ensemble of critical heights over a design (mc, lhs, sobol, saltelli)"
-RUN_OPTIONS = frozenset({"out", "n", "resume", "force", "workers", "scheduler", "chunk_size"})
+RUN_OPTIONS = frozenset({"out", "n", "resume", "force", "workers", "scheduler", "chunk_size",
+                         "yes"})
 REPORT_OPTIONS = frozenset({"out", "confidence"})
 
 
@@ -54,12 +55,18 @@ def run(study, options: RunOptions) -> Outcome:
     the one named on the command line).
     """
     from skidmc.ensemble import run as run_module
+    from skidmc.scene.scenes import implausible_inputs
 
+    if not options.quiet:
+        for sc in getattr(study, "scenes", ()):  # taken at their word, but flagged
+            for line in implausible_inputs(sc.scene):
+                options.log(f"skidmc run: warning: scene {sc.name}: {line}; the model was not "
+                            "made for it and its heights may mean nothing")
     report = run_module.execute_study(
         options.study_path or study, options.out, n=options.n, workers=options.workers,
         scheduler=options.scheduler, resume=options.resume, force=options.force,
         progress=False if options.quiet else None, chunk_size=options.chunk_size,
-        command=options.command, solver=options.solver)
+        command=options.command, solver=options.solver, confirm=options.confirm)
     lines: list[str] = []
     if not options.quiet:
         if report.action == "up_to_date":
@@ -70,9 +77,24 @@ def run(study, options: RunOptions) -> Outcome:
             lines.append(f"{report.path}: {report.summary()}")
         lines += scene_summary_lines(report.path)
         failed = report.status_counts.get("failed", 0)
-        if failed:
+        if failed and failed < report.evaluated:
             lines.append(f"skidmc run: {failed} samples failed; see failure_reason in the file")
+    if report.evaluated and report.status_counts.get("failed", 0) == report.evaluated:
+        # nothing usable: an input the solver cannot take, most likely; exit 1 with the reasons
+        lines.append(f"skidmc run: error: all {report.evaluated} evaluations failed: "
+                     f"{_failure_reasons(report.path)}")
+        return Outcome(1, report.path, tuple(lines))
     return Outcome(0, report.path, tuple(lines))
+
+
+def _failure_reasons(path) -> str:
+    """The failed samples' reasons in the file, counted."""
+    from skidmc.ensemble.run import failure_counts
+    from skidmc.ensemble.storage import open_ensemble
+
+    ds = open_ensemble(path)
+    failed = ds["status"].values == "failed"
+    return failure_counts(ds["failure_reason"].values[failed])
 
 
 def report(target, options: ReportOptions) -> Outcome:
@@ -93,6 +115,14 @@ def ensemble_report(target, options: ReportOptions, default) -> Outcome:
             return Outcome(2, None, (f"skidmc report: error: {options.source}: no result yet at "
                                      f"{path}; run it first: skidmc run {options.source}",))
     ds = open_ensemble(path)
+    usable = int((ds["status"].values != "failed").sum() - ds.attrs["unfinished"])
+    if usable <= 0 and "failure_reason" in ds:
+        from skidmc.ensemble.run import failure_counts
+
+        failed = ds["status"].values == "failed"
+        return Outcome(2, None, (f"skidmc report: error: {path}: no sample to report on: all "
+                                 f"{int(failed.sum())} samples written failed ("
+                                 f"{failure_counts(ds['failure_reason'].values[failed])})",))
     lines = []
     if ds.attrs["unfinished"]:
         lines.append(f"skidmc report: warning: {path}: {ds.attrs['unfinished']} samples "

@@ -111,6 +111,11 @@ class RunOptions:
         The study file as given.
     log : callable
         Receives each progress or summary line (stderr by default).
+    confirm : callable or None
+        Told a new run's size (:class:`skidmc.ensemble.run.RunSize`) before its file is made;
+        returns whether to go on (``skidmc run``: prints it, asks about a large run).
+    yes : bool
+        ``--yes``: a large run goes on without asking (the kinds that ask: ensemble).
     """
 
     out: str | None = None
@@ -125,11 +130,13 @@ class RunOptions:
     solver: Callable | None = None
     study_path: str | None = None
     log: Callable[[str], None] = _stderr
+    confirm: Callable | None = None
+    yes: bool = False
 
     #: The options a user gives (the rest are plumbing), with their command-line spelling.
     USER_OPTIONS = {"out": "--out", "n": "--n", "resume": "--resume", "force": "--force",
                     "workers": "--workers", "scheduler": "--scheduler",
-                    "chunk_size": "--chunk-size"}
+                    "chunk_size": "--chunk-size", "yes": "--yes"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -234,8 +241,25 @@ def kind_of_result(path: str | Path) -> str:
         return "ensemble"
 
 
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
 def load(path: str | Path) -> tuple[str, object]:
-    """The kind of a study file and the study, validated by its kind."""
+    """The kind of a study file and the study, validated by its kind.
+
+    A result file (HDF5) given where a study is wanted is refused saying so (a StudyError),
+    rather than failing to decode it as text."""
+    from skidmc.ensemble.study_model import StudyError
+
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        head = b""  # reading it as a study says why
+    if head == HDF5_SIGNATURE:
+        raise StudyError(str(path), "study", Path(path).name,
+                         "is a result file (HDF5), not a study file (TOML): run the study that "
+                         f"made it, or analyse it with: skidmc report {path}")
     name = kind_of_file(path)
     return name, get_kind(name).load(path)
 
