@@ -36,7 +36,7 @@ from skidmc.ensemble.study import (
     load_study,
     parse_study,
 )
-from skidmc.scene import get_preset, make_scene
+from skidmc.scene import make_scene
 from skidmc.workflows import registry
 
 ROOT = Path(__file__).resolve().parents[1]

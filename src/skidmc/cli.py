@@ -492,16 +492,6 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 def _add_plan_parser(subparsers) -> None:
     """Register ``skidmc plan``: the next drop to make, from drops so far and a prior."""
-
-    def _in_unit_interval(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got {text!r}") from None
-        if not 0.0 < value < 1.0:
-            raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text!r}")
-        return value
-
     plan = subparsers.add_parser(
         "plan", help="the next go/no-go drop to make, with the current H50 and its interval",
         description="The drop height that minimises the expected posterior variance of ln H50 "
@@ -525,9 +515,9 @@ def _add_plan_parser(subparsers) -> None:
                       help="centre of the vague prior [units] (default: the drops' geometric "
                       "mean)")
     plan.add_argument("--units", choices=("ft", "m"), default="ft", help="height unit")
-    plan.add_argument("--p", type=_in_unit_interval, default=0.5,
+    plan.add_argument("--p", type=_unit_interval, default=0.5,
                       help="plan for the height with P(go) = p (default: 0.5, H50)")
-    plan.add_argument("--credibility", type=_in_unit_interval, default=0.9,
+    plan.add_argument("--credibility", type=_unit_interval, default=0.9,
                       help="level of the printed interval (default: 0.9)")
     plan.add_argument("--json", action="store_true", help="print JSON")
 
