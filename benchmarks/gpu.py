@@ -1,6 +1,6 @@
 """GPU backend against the CPU full tier: critical heights per second and agreement.
 
-    python benchmarks/gpu.py [--sizes 10000 100000 1000000] [--cpu-sample 200]
+    python benchmarks/gpu.py [--sizes 10000 100000] [--cpu-sample 200]
 
 Scenes are the inputs of the shipped ``paper-series1`` ensemble (4 scenes x 50 epistemic x 200
 aleatory draws = 40,000 sampled scenes, ``results/paper-series1/ensemble.h5``), resampled with
@@ -49,7 +49,8 @@ def study_rows():
     # The ensemble names inputs by scene key (NUMERIC_KEYS, the order of SCENE_FIELDS).
     rows = np.column_stack([np.asarray(ds[key].broadcast_like(shape)).ravel()
                             for key in NUMERIC_KEYS])
-    return rows[np.isfinite(rows).all(axis=1)]
+    # target.hardness is +inf for the report's rigid targets: drop only scenes with a NaN input.
+    return rows[~np.isnan(rows).any(axis=1)]
 
 
 def cpu_full_tier(rows, rtol):
@@ -64,7 +65,7 @@ def cpu_full_tier(rows, rtol):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000])
     parser.add_argument("--cpu-sample", type=int, default=200)
     parser.add_argument("--seed", type=int, default=17)
     parser.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
@@ -97,10 +98,11 @@ def main(argv=None):
                                    "median_rel_diff": _median(gpu[:len(sample)], h_cpu)})
         report["rows"].append(row)
         print(json.dumps(row), flush=True)
-    out_dir = Path(args.out)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "gpu.json").write_text(json.dumps(report, indent=2) + "\n")
-    (out_dir / "gpu.md").write_text(_markdown(report))
+        # Written after every rtol: a run cut short (a lent GPU's time is short) keeps its rows.
+        out_dir = Path(args.out)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "gpu.json").write_text(json.dumps(report, indent=2) + "\n")
+        (out_dir / "gpu.md").write_text(_markdown(report))
     print(f"wrote {out_dir / 'gpu.md'}")
     return 0
 

@@ -30,9 +30,7 @@ def compile_ptx(cc=(9, 0)):
     # No driver: tell the device-function compiler which target to build for.
     dispatcher.get_current_device = lambda: types.SimpleNamespace(compute_capability=cc)
     numba_cuda = backend._numba_cuda()
-    sig = ("void(float64[:, ::1], float64, float64, float64, float64, float64, float64, "
-           "boolean, float64, float64[::1], float64[::1], float64[::1], float64[:, ::1])")
-    ptx, _ = numba_cuda.compile_ptx(backend._thread, sig, cc=cc)
+    ptx, _ = numba_cuda.compile_ptx(backend._thread, backend.THREAD_SIGNATURE, cc=cc)
     return ptx
 
 

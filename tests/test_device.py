@@ -228,6 +228,24 @@ def test_cuda_backend_without_a_gpu_says_what_is_missing_and_cpu_never_imports_i
         assert "GPU" in proc.stdout or "CUDA" in proc.stdout
 
 
+def test_the_ptx_signature_names_every_argument_of_the_thread():
+    # scripts/compile_cuda_ptx.py compiles _thread with THREAD_SIGNATURE; an argument added to
+    # _thread and not to the signature broke that compile on a real GPU once (13 types for 14
+    # arguments), a drift no CPU test saw. Parse the signature's top-level commas.
+    import inspect
+
+    from skidmc.solver import cuda as backend
+
+    body = backend.THREAD_SIGNATURE[len("void("):-1]
+    depth, count = 0, 1
+    for ch in body:
+        depth += ch == "[" or -(ch == "]")
+        count += ch == "," and depth == 0
+    assert count == len(inspect.signature(backend._thread).parameters)
+    # The arrays: rows and out are 2-D, the three tables 1-D; the rest scalars.
+    assert body.count("[:, ::1]") == 2 and body.count("[::1]") == 3
+
+
 @pytest.mark.slow
 def test_kernel_compiles_to_ptx_for_a_real_gpu():
     pytest.importorskip("numba_cuda", reason="numba-cuda (and NVVM) are needed to build PTX")

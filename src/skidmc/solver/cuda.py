@@ -111,6 +111,13 @@ def _thread(rows, rtol, h_min, h_max, level, melt_width, melt_spread, x_tol, mel
               runaway_fraction, table, gl_x, gl_w, work, fast_work, info, coarse, fine, out[i])
 
 
+#: The types of :func:`_thread`'s arguments, in order: what ``scripts/compile_cuda_ptx.py``
+#: compiles ahead of a GPU (tests/test_device.py checks that it names every argument).
+THREAD_SIGNATURE = ("void(float64[:, ::1], float64, float64, float64, float64, float64, float64, "
+                    "float64, boolean, float64, float64[::1], float64[::1], float64[::1], "
+                    "float64[:, ::1])")
+
+
 # What a thread calls: the compiled search itself on a GPU (numba compiles the njit function
 # for the device). Numba's CUDA simulator runs the kernel as Python and hands it array
 # wrappers that a compiled function cannot take, so there :func:`_simulated_core` unwraps them
