@@ -246,6 +246,13 @@ def test_evaluations_for_1e6_against_subset_and_form_is():
         )
         assert result.converged and within(result, 1e-6)
         costs[f"structured-{method}"] = result.evaluations
+    # Budgets: subset simulation needs about 0.75-3.5 million evaluations for a stated CoV of 0.1
+    # here, whatever samples_per_level (N = 1000-10000, seeds 0-3): its runs scatter by a log-sd
+    # of about 1 (a CoV per run of 1.1-2.4, 2.6-5.7x what Au & Beck's formula states), and the
+    # stated CoV takes the runs' noisy spread (docs/rare-events.md). The budget of 1e6 this test
+    # had passed at one seed by luck (seeds 1-3 fail it with the code before issue 41 too);
+    # 6e6 leaves room at any seed measured. The seed is the default one: 2.48e6 were used.
+    budgets = {"form-is": 1_000_000, "subset": 6_000_000}
     for method in ("form-is", "subset"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -254,7 +261,7 @@ def test_evaluations_for_1e6_against_subset_and_form_is():
                 [*MARGINALS, DROP_HEIGHT],
                 method,
                 correlation=EXTENDED_CORRELATION,
-                max_evaluations=1_000_000,
+                max_evaluations=budgets[method],
             )
         assert result.converged and within(result, 1e-6)
         costs[method] = result.evaluations
