@@ -426,6 +426,13 @@ def test_report_of_a_hazard_study_shows_its_summary(tmp_path, capsys):
     # The committed solver calls, reported into a copy: the test never rewrites results/.
     shutil.copyfile(ROOT / "results" / "hazard-handling" / "evaluations.h5",
                     tmp_path / "evaluations.h5")
+    from skidmc.ensemble.storage import EvaluationLog, library_versions
+
+    logged = EvaluationLog(tmp_path / "evaluations.h5", {}).info()["libraries"]
+    if logged and logged != library_versions():
+        # The replay compares each call's inputs to the last bit; other numpy/scipy releases
+        # move them (seen with the lower bounds of pyproject.toml). Said, not failed.
+        pytest.skip(f"shipped log computed with {logged}, here {library_versions()}")
     assert main(["report", str(ROOT / "studies" / "hazard-handling.toml"),
                  "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out

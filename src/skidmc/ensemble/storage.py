@@ -1149,6 +1149,14 @@ class LoggedCall:
     failure_reason: np.ndarray
 
 
+def library_versions() -> str:
+    """``"numpy X, scipy Y"``: the libraries whose last bits a replayed log's inputs depend on
+    (the estimator's draws and transforms; an EvaluationLog compares inputs by digest)."""
+    import scipy
+
+    return f"numpy {np.__version__}, scipy {scipy.__version__}"
+
+
 class EvaluationLog:
     """The solver calls of an adaptive study, kept so that a run resumes and a report replays.
 
@@ -1194,6 +1202,7 @@ class EvaluationLog:
                 return {"exists": True, "complete": bool(f.attrs.get("complete", 0)),
                         "study_sha256": str(f.attrs.get("study_sha256", "")),
                         "study_file": str(f.attrs.get("study_file", "")),
+                        "libraries": str(f.attrs.get("libraries", "")),
                         "calls": int(f["digest"].shape[0]) if "digest" in f else 0}
         calls = sorted(self.folder.glob("*.h5")) if self.folder.is_dir() else []
         return {"exists": bool(calls), "complete": False,
@@ -1301,7 +1310,8 @@ class EvaluationLog:
         with h5py.File(tmp, "w") as f:
             f.attrs.update({"skidmc_format": EVALUATIONS_FORMAT,
                             "skidmc_version": _version(), "complete": np.int8(1),
-                            "completed": timestamp(), **self.attrs})
+                            "completed": timestamp(), "libraries": library_versions(),
+                            **self.attrs})
             f.create_dataset("call", data=call, **kw)
             f.create_dataset("critical_height", data=heights, **kw).attrs["units"] = "m"
             f.create_dataset("status", data=codes, **kw).attrs.update(Status.flag_attrs())

@@ -54,9 +54,16 @@ class RecordedSolver:
             call = self.kept[i]
         else:
             if self.replay_only:
+                from skidmc.ensemble.storage import library_versions
+
+                logged = self.log.info().get("libraries", "")
+                here = library_versions()
+                why = (f"; the log was computed with {logged}, this machine has {here}, and a "
+                       "call's inputs are compared to the last bit" if logged and logged != here
+                       else "")
                 raise StorageError(self.log.path, f"holds {len(self.kept)} solver calls that "
                                    f"do not cover this study's estimate (call {i} differs or "
-                                   "is missing): finish it with skidmc run --resume, or "
+                                   f"is missing{why}): finish it with skidmc run --resume, or "
                                    "recompute it with skidmc run --force")
             if i < len(self.kept):  # another computation from here on: forget the rest
                 self.kept = self.kept[:i]
