@@ -281,12 +281,17 @@ def report(rows):
            "keeping the pivot at 550 K.",
            f"- **Rate spread at the pivot.** Between the distinct pairs ln k(550 K) has sd "
            f"{np.std(lk[550.0], ddof=1):.2f}; about the line the residual sd is "
-           f"{fit['resid_sd']:.2f}. Both rest on four pairs, three of them near-copies, so "
+           f"{fit['resid_sd']:.2f}. Both rest on four pairs, three of them at one point "
+           "(E/R within 322 K, log10 Z 19.70), so "
            f"neither is a reliable estimate of the between-study scatter; the studies' "
            f"{PRIOR_LOG_SD} (a decade at 2 sigma) is wider than either and is not contradicted "
-           "by them. Mismatch of the pivot: with the fitted slope, E/R's spread alone adds "
-           f"|b - 1/550| sd_E/R = {abs(fit['b'] - 1 / 550) * sd_prior:.2f} to the spread of "
-           "ln k(550 K) that the published fits show.",
+           "by them. With the fitted slope a rate pinned at 550 K still moves with E/R, by "
+           f"(b - 1/550) sd_E/R = {(fit['b'] - 1 / 550) * sd_prior:.2f} over the studies' E/R "
+           "range (higher E/R, faster at 550 K); the prior draws the two independently: its "
+           f"spread ({PRIOR_LOG_SD}) covers the line-implied "
+           f"{math.hypot((fit['b'] - 1 / 550) * sd_prior, fit['resid_sd']):.2f}, its "
+           "independence ignores the correlation (a pivot at T_iso would remove it; T_iso's "
+           "interval includes 550 K).",
            f"- **E/R range.** The distinct pairs span E/R {min(e_pub):.0f}-{max(e_pub):.0f} K; "
            f"Koptelov et al.'s 38 thermal-analysis values {k_lo:.0f}-{k_hi:.0f} K. No published "
            f"value found lies above {max(max(e_pub), k_hi):.0f} K: the prior's upper half "
@@ -295,11 +300,33 @@ def report(rows):
            f"{100 * (REPORT_E_R - k_lo) / (max(max(e_pub), k_hi) - k_lo):.0f}th percentile of "
            f"a uniform over the published span ({k_lo:.0f}-{max(max(e_pub), k_hi):.0f} K).",
            "- **Is there a compensation line at all?** The slope rests on one pair: without "
-           "Ward, Son & Brewster the other three span 320 K of E/R and give no slope. A line "
+           f"Ward, Son & Brewster the other three span {np.ptp(x[x > 25000.0]):.0f} K of E/R "
+           "and give no slope. A line "
            "through two clusters (one of them a single zero-order combustion-model constant) is "
            "not a fitted compensation law with a trustworthy scatter; it is the statement that "
            "these two independent routes to HMX's rate agree near "
            f"{fit['t_iso']:.0f} K.", ""]
+    e_top = max(max(e_pub), k_hi)
+    md += ["### Old and data-supported prior (the lead decides)", "",
+           "| input | studies now | what the pairs support |", "|---|---|---|",
+           f"| E/R | uniform {PRIOR_E_R[0]:.0f}-{PRIOR_E_R[1]:.0f} K, centred on the report "
+           f"| uniform {k_lo:.0f}-{e_top:.0f} K, the published span (lowest of Koptelov et "
+           f"al.'s E to the highest pair); median {(k_lo + e_top) / 2:.0f} K, the report at the "
+           f"{100 * (REPORT_E_R - k_lo) / (e_top - k_lo):.0f}th percentile. Centring on the "
+           "report needs the unsourced upper half (a judgement to be written as one) |",
+           f"| pivot of the rate | {PRIOR_T_REF:.0f} K | {PRIOR_T_REF:.0f} K (T_iso "
+           f"{fit['t_iso']:.0f} K, 95 % {fit['t_iso_ci'][0]:.0f}-{fit['t_iso_ci'][1]:.0f} K; "
+           "not the 714-766 K of ignition) |",
+           f"| log-sd of the rate at the pivot | {PRIOR_LOG_SD} (judgement) | at least "
+           f"{np.std(lk[550.0], ddof=1):.2f} (the pairs' spread at 550 K; "
+           f"{math.hypot((fit['b'] - 1 / 550) * sd_prior, fit['resid_sd']):.2f} with the "
+           f"fitted slope over the present E/R range); {PRIOR_LOG_SD} stays a judgement the "
+           "four pairs neither confirm nor narrow |", "",
+           "- Direction (from the solver's runs in results/validation/input_derivation.md, "
+           "\"Which pivot\", not from any comparison with the experiments): at the 550 K pivot "
+           "H_c falls as E/R rises (quartz 2.38 ft at 15,034 K, 1.22 ft at 26,300 K, 0.943 ft "
+           "at 37,566 K), so dropping the unsourced upper half would raise every predicted "
+           "median H_c.", ""]
     return md, fit
 
 
