@@ -223,10 +223,13 @@ def report(rows):
                   f"{float(r['log10_Z']):.3f} | {r['order'] or '?'} | "
                   + " | ".join(f"{float(ln_rate(r['ln_Z'], r['E_R'], t)):.2f}" for t in PIVOTS)
                   + f" | {seen} |")
-    md += ["", f"{len(d)} distinct pairs (no row is marked a copy). Three lie within 320 K of each "
-           "other (E/R 26,300-26,620 K, log10 Z 19.70); the fourth (Ward, Son & Brewster) is a "
-           "zero-order condensed-phase rate fitted to burning rates, the only pair away from the "
-           "cluster.", ""]
+    cluster = [r for r in d if r["E_R"] > 25000.0]
+    span = max(r["E_R"] for r in cluster) - min(r["E_R"] for r in cluster)
+    md += ["", f"{len(d)} distinct pairs ({len(rows) - len(d)} rows marked a copy). "
+           f"{len(cluster)} lie within {span:.0f} K of each other (E/R "
+           f"{min(r['E_R'] for r in cluster):.0f}-{max(r['E_R'] for r in cluster):.0f} K, "
+           "log10 Z 19.70); the other (Ward, Son & Brewster) is a zero-order condensed-phase "
+           "rate fitted to burning rates, the only pair away from the cluster.", ""]
 
     md += ["## The line ln Z = a + b E/R", "",
            "| fit | a | b [1/K] | T_iso = 1/b [K] | 95 % interval of T_iso [K] | residual sd of "
