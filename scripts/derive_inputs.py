@@ -201,9 +201,10 @@ def main():
     s_m = float(np.std(lk, ddof=1))
     s_k = math.sqrt(s_m ** 2 + (s_e * dlt) ** 2)
     md += ["",
-           f"- The cited pairs span E/R {er.min():.0f}-{er.max():.0f} K: too narrow to fit a "
-           "compensation line (its slope is undetermined); their rates at 550 K agree within "
-           f"a log-sd of {s_m:.2f}.",
+           f"- The pairs span E/R {er.min():.0f}-{er.max():.0f} K; their rates at 550 K agree "
+           f"within a log-sd of {s_m:.2f}. The compensation line through them (its slope rests "
+           "on the one pair away from the report's cluster) is fitted in "
+           "`results/validation/kinetics_compensation.md` (scripts/kinetics_compensation.py).",
            f"- Koptelov et al. (2007) collect 38 thermal-analysis E for HMX: 125-216 kJ/mol, "
            f"E/R {e_lo:.0f}-{e_hi_lit:.0f} K. Centred on the report's 26,300 K with the half-width "
            "to the lowest published value: E/R uniform on "
