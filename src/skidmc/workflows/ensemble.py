@@ -28,17 +28,11 @@ def detect(doc: dict) -> bool:
 
 
 def load(path):
-    """The validated study (:func:`skidmc.ensemble.study.load_study`); a saltelli design with
-    ``n_max`` is the sobol kind's, refused here when the file says ``kind = "ensemble"``."""
+    """The validated study (:func:`skidmc.ensemble.study.load_study`, the ensemble kind's
+    model: a saltelli design with ``n_max`` is the sobol kind's, refused)."""
     from skidmc.ensemble.study import load_study
-    from skidmc.ensemble.study_model import StudyError
 
-    study = load_study(path)
-    if study.design.n_max:
-        raise StudyError(study.file, "design.n_max", study.design.n_max,
-                         "grows N until the Sobol' indices are stable: only for kind = 'sobol' "
-                         "(drop the kind line, or n_max)")
-    return study
+    return load_study(path, kind="ensemble")
 
 
 def default_out(study) -> Path:

@@ -310,20 +310,6 @@ class _Tally:
                 self.reasons.append(str(reason))
 
 
-def _physical(d: Distribution, nominal: float):
-    """The frozen distribution of d's values [SI]: a relative one scaled by `nominal`."""
-    return _scaled(d, nominal) if d.relative else d.frozen
-
-
-def _scaled(d: Distribution, factor: float):
-    """d's frozen distribution with its loc and scale times `factor` (the distribution of
-    factor x X: a relative one on its nominal value, a drop height with its median moved)."""
-    params = dict(d.params)
-    params["loc"] = params.get("loc", 0.0) * factor
-    params["scale"] = params.get("scale", 1.0) * factor
-    return getattr(stats, d.name)(**params)
-
-
 class _CriticalHeight:
     """H_c(X) [m] on one surface: X's columns are `keys` [SI], `fixed` fills in the rest.
 
@@ -408,7 +394,7 @@ def _marginals(study: HazardStudy, surface: Surface, keys: tuple[str, ...]) -> l
             d = study.angle
         else:
             d = study.billet.get(key) or study.epistemic[key]
-        out.append(_physical(d, _nominal(study, surface, key) if d.relative else 1.0))
+        out.append(d.physical(_nominal(study, surface, key) if d.relative else 1.0))
     return out
 
 
@@ -1013,7 +999,7 @@ def _fragility(study: HazardStudy, pooled: list[_Estimate], outer) -> dict[str, 
     out: dict[str, list[float]] = {"median": [], "probability": [], "cov": [], "band_low": [],
                                    "band_high": []}
     for factor in FRAGILITY_FACTORS:
-        drop = _scaled(study.drop_height, factor)
+        drop = study.drop_height.scaled(factor)
         p, se = _reweighted(strata, drop)
         out["median"].append(median * factor)
         out["probability"].append(p)
