@@ -552,7 +552,9 @@ def _add_plan_parser(subparsers) -> None:
                 factor = 1.0
                 if column is None and f"height_{other}" in rows[0]:
                     column = f"height_{other}"
-                    factor = 0.3048 if other == "ft" else 1 / 0.3048
+                    from skidmc.scene.units import FOOT
+
+                    factor = FOOT if other == "ft" else 1 / FOOT
                 if column is None:
                     raise ValueError(f"{args.drops}: needs a column height_ft, height_m or "
                                      f"height; has {', '.join(rows[0])}")

@@ -44,6 +44,7 @@ from skidmc.analysis.gonogo import (
     updown,
 )
 from skidmc.analysis.skill import MIN_DROPS_RELIABILITY, plot_reliability, reliability, skill_scores
+from skidmc.scene.units import FOOT as FT  # [m per ft]
 
 __all__ = [
     "FT",
@@ -57,7 +58,6 @@ __all__ = [
 ]
 
 #: [m per ft], exact.
-FT = 0.3048
 
 #: Censoring marks of the fits, by the ensemble's ``status``.
 _CENSORING = {"ok": "", "censored_above": "above", "censored_below": "below"}
