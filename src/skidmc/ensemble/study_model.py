@@ -1,8 +1,11 @@
-"""The data model of a study: what :func:`skidmc.ensemble.study.load_study` returns.
+"""The data model of a study: what the study loaders return.
 
-Frozen dataclasses (:class:`Study`, its :class:`StudyScene` s, :class:`Distribution` s,
-:class:`Correlation` s, :class:`DesignSpec` and :class:`SolverOptions`) and the errors
-(:class:`StudyError`). The file format and its validation are :mod:`skidmc.ensemble.study`.
+Frozen dataclasses: :class:`Study` (:func:`skidmc.ensemble.study.load_study`), its
+:class:`StudyScene` s, :class:`Distribution` s, :class:`Correlation` s, :class:`DesignSpec` and
+:class:`SolverOptions`; :class:`HazardStudy` (:func:`skidmc.ensemble.hazard_study.
+load_hazard_study`) with its :class:`Surface` s and :class:`EstimatorOptions`; and the errors
+(:class:`StudyError`). The file formats, and the validation that builds these, are the
+pydantic models of :mod:`skidmc.ensemble.study_schema`.
 """
 
 from __future__ import annotations

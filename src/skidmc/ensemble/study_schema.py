@@ -70,6 +70,7 @@ from pydantic import (
     model_validator,
 )
 
+from skidmc.ensemble import study_model
 from skidmc.ensemble.study_model import (
     BILLET_KEYS,
     DESIGN_METHODS,
@@ -80,7 +81,6 @@ from skidmc.ensemble.study_model import (
     STUDY_RANGES,
     U_TAIL,
     Correlation,
-    DesignSpec,
     Distribution,
     EstimatorOptions,
     HazardStudy,
@@ -779,7 +779,7 @@ class DesignTable(_Table):
     stable_half_width: Annotated[float, _open_unit(), Field(gt=0, lt=1)] = 0.05
     #: Whether the design grows N (kind sobol: True; ensemble: False; either: None).
     GROWS: ClassVar[bool | None] = None
-    _spec: DesignSpec = PrivateAttr()
+    _spec: study_model.DesignSpec = PrivateAttr()
 
     @model_validator(mode="after")
     def _combination(self) -> DesignTable:
@@ -808,7 +808,7 @@ class DesignTable(_Table):
         growth = {} if self.n_max is None else {
             "n_max": self.n_max, **{k: float(getattr(self, k)) for k in given
                                     if k.startswith("stable_")}}
-        self._spec = DesignSpec(method=self.method, n=self.n, seed=self.seed,
+        self._spec = study_model.DesignSpec(method=self.method, n=self.n, seed=self.seed,
                                 second_order=self.second_order, n_epistemic=self.n_epistemic,
                                 **growth)
         return self
@@ -1009,7 +1009,7 @@ def _correlations(tables: list[CorrelationSpec], scenes) -> tuple[Correlation, .
     return tuple(out)
 
 
-def _check_kinds(scenes, keys, design: DesignSpec, correlations) -> None:
+def _check_kinds(scenes, keys, design: study_model.DesignSpec, correlations) -> None:
     """Aleatory and epistemic inputs: one kind per key; both present <=> a nested design."""
     kinds: dict[str, str] = {}
     for sc in scenes:
@@ -1414,6 +1414,12 @@ def register(kind: str) -> Callable[[type[BaseModel]], type[BaseModel]]:
 
     return add
 
+
+#: Names of these models before they loaded the files (kept for code written against them).
+_Strict = _Table
+_StudyFile = StudyFile
+DesignSpec = DesignTable
+SobolDesignSpec = SobolDesignTable
 
 register("ensemble")(EnsembleFile)
 register("sobol")(SobolFile)
