@@ -325,7 +325,6 @@ class _Table(BaseModel):
 # --- distributions --------------------------------------------------------------------------------
 
 
-_DIST_META = ("distribution", "source", "relative", "reference_temperature", "kind")
 _CONTINUOUS = tuple(n for n in dir(scipy.stats)
                     if isinstance(getattr(scipy.stats, n), scipy.stats.rv_continuous))
 # "<number> <unit>": to convert a spread (a temperature difference) separately from a level.
