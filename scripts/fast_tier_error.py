@@ -40,6 +40,7 @@ from skidmc.ensemble.study import RATE_AT_REFERENCE, load_study
 from skidmc.physics.fast import ERROR_ESTIMATE, ERROR_SELF_HEATING, ERROR_STOPS_SLIDING
 from skidmc.physics.mechanics import EXIT_STOPS_SLIDING
 from skidmc.scene import get_preset
+from skidmc.scene.units import FOOT
 from skidmc.solver import critical_height, fast
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -281,7 +282,7 @@ def main(argv=None):
     lines += ["", "Report presets (ft):", "", "| preset | full | fast | rel |", "|---|---|---|---|"]
     for i, lab in enumerate(labels):
         if lab.startswith("preset/"):
-            lines.append(f"| {lab[7:]} | {h_full[i] / 0.3048:.4g} | {h_fast[i] / 0.3048:.4g} "
+            lines.append(f"| {lab[7:]} | {h_full[i] / FOOT:.4g} | {h_fast[i] / FOOT:.4g} "
                          f"| {rel[i]:+.3f} |")
     lines += ["", "## Stated error by region and its coverage", "",
               "`error_estimate` of a fast result is the bound of its region "

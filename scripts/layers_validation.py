@@ -31,12 +31,13 @@ import numpy as np
 from skidmc.physics.layered import layer_interface_rise
 from skidmc.scene import make_scene
 from skidmc.scene.materials import parse_layers
+from skidmc.scene.units import FOOT
 from skidmc.solver import critical_height, simulate
 from skidmc.solver.model import build_model
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "validation"
-FT = 0.3048
+FT = FOOT  # [m per ft]
 
 
 def _eff(k, rho, c):

@@ -5,7 +5,7 @@ The HE's latent heat is released over a tanh step of width w around T_m
 fine resolution level the critical height is computed for w = 0.125 ... 4 K and compared with
 its limit w -> 0, extrapolated linearly from w = 0.25 and 0.125 K (the bias is close to first
 order in w). The bias per kelvin bounds ``skidmc.solver.model.MELT_WIDTH_BIAS_PER_K``, which the
-solver uses to choose w from its tolerance (``skidmc.solver.melt_width_for_rtol``).
+solver uses to choose w from its tolerance (``skidmc.solver.plan.melt_width_for_rtol``).
 
 Writes results/validation/melt_width_bias.{csv,md}. Run: ``python scripts/melt_width_bias.py``
 (~5 min on one core).
@@ -83,7 +83,7 @@ def main():
         + ("covers it." if worst <= MELT_WIDTH_BIAS_PER_K else "DOES NOT cover it."),
         "The bias is close to first order in w (not second, as a symmetric smoothing alone "
         "would give), so the solver keeps w fixed across the levels of a search and bounds "
-        "its bias separately (skidmc.solver.melt_width_for_rtol).",
+        "its bias separately (skidmc.solver.plan.melt_width_for_rtol).",
     ]
     (OUT / "melt_width_bias.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

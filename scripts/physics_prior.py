@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import skidmc
-
-FOOT = 0.3048  # m, exact
+from skidmc.scene.units import FOOT
 
 
 def main(argv=None) -> int:

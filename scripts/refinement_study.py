@@ -2,7 +2,7 @@
 
 For every report preset (and the second series' extreme mu values) the critical
 height is computed at levels 0, 0.5, ..., 4 (each level doubles the cells per medium,
-halves the first cell and halves the time step, see skidmc.model) with a root-finder
+halves the first cell and halves the time step, see skidmc.solver.model) with a root-finder
 tolerance far below the discretisation error. The converged value is estimated by
 Richardson extrapolation of the two finest levels (second order: ratio 4 per level),
 and the error of each level is measured against it. The observed order is reported,
@@ -36,6 +36,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from skidmc.scene import make_scene  # noqa: E402
+from skidmc.scene.units import FOOT  # noqa: E402
 from skidmc.solver import critical_height  # noqa: E402
 from skidmc.solver.model import melt_width_floor, resolution_for_level  # noqa: E402
 from skidmc.solver.plan import (  # noqa: E402
@@ -153,7 +154,7 @@ def main():
         worst = np.maximum(worst, err)
         i1, i3 = levels.index(1.0), levels.index(3.0)
         order = math.log(max(err[i1], 1e-16) / max(err[i3], 1e-16)) / math.log(4.0)
-        lines.append(f"| {case} | {conv:.6g} | {conv / 0.3048:.5g} | "
+        lines.append(f"| {case} | {conv:.6g} | {conv / FOOT:.5g} | "
                      + " | ".join(f"{e:.1e}" for e in err) + f" | {order:.2f} |")
     model_err = [ERROR_LEVEL0 * 4.0 ** (-lv) for lv in levels]
     lines += [

@@ -28,6 +28,7 @@ import numpy as np
 
 from skidmc.scene import make_scene
 from skidmc.scene.materials import PROPERTY_TABLES
+from skidmc.scene.units import FOOT
 from skidmc.solver import critical_height, simulate
 from skidmc.solver.model import build_model
 
@@ -82,7 +83,7 @@ def main(argv=None) -> int:
                 "target.heat_capacity": scene.target_heat_capacity * rc})
             out.append(critical_height(varied, rtol=RTOL).critical_height / h - 1.0)
         lines.append(
-            f"| {preset} | {target or 'preset (report Table VI)'} | {h / 0.3048:.3g} | "
+            f"| {preset} | {target or 'preset (report Table VI)'} | {h / FOOT:.3g} | "
             f"{t_mean:.0f} / {t_peak:.0f} | {ratios[0][0]:.2f} / {ratios[1][0]:.2f} | "
             f"{ratios[0][1]:.2f} / {ratios[1][1]:.2f} | {out[0]:+.3f} | {out[1]:+.3f} |")
     lines += [

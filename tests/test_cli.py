@@ -390,7 +390,7 @@ def test_report_of_a_result_file(tmp_path, study_file, capsys):
     assert main(["report", str(path), "--out", str(tmp_path / "rep")]) == 0
     out = capsys.readouterr().out
     # One line per scene with its H50 and interval, then where the report is.
-    assert re.search(r"^quartz: H50 [\d.e+-]+ ft \(95% interval [\d.e+-]+ to ", out, re.M)
+    assert re.search(r"^quartz: H50 [\d.e+-]+ ft \(95 % interval [\d.e+-]+ to ", out, re.M)
     assert out.strip().endswith(str(tmp_path / "rep" / "summary.md"))
     for name in ("summary.md", "summary.json", "curves.h5", "go_quartz.png", "qq.png"):
         assert (tmp_path / "rep" / name).is_file(), name

@@ -10,7 +10,8 @@ import pytest
 import xarray as xr
 from scipy import stats
 
-from skidmc.analysis.report import FT, analyse_scene, ensemble_sobol, scene_outcomes, write_report
+from skidmc.analysis.report import FT, analyse_scene, ensemble_sobol, scene_outcomes
+from skidmc.workflows.reporting.ensemble import write_report
 
 H50_FT, SIGMA = 2.0, 0.4
 
@@ -178,7 +179,7 @@ def test_figures_count_drops_per_height_and_name_the_report_lines():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from skidmc.analysis.report import _draw_drops, _report_lines
+    from skidmc.workflows.reporting.ensemble import _draw_drops, _report_lines
 
     a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
     fig, ax = plt.subplots()
@@ -247,7 +248,7 @@ def test_convergence_plot_gives_every_input_its_own_colour():
 def test_summary_says_whether_the_experiment_lies_in_the_band(tmp_path):
     # Synthetic H50 = 2 ft with a narrow sampling interval (400 samples): the report's 1.8 ft
     # lies below it; the row also carries the report's own calculation (Table VIII: 1.25 ft).
-    from skidmc.analysis.report import _inside_band
+    from skidmc.workflows.reporting.ensemble import _inside_band
 
     a = analyse_scene(_ensemble(), "quartz", experiment="quartz")
     _, low, high = a.predicted_h50()

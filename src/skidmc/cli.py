@@ -18,7 +18,6 @@ Examples
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from collections.abc import Sequence
@@ -75,12 +74,12 @@ def _table(rows: Sequence[Sequence[str]], indent: str = "") -> str:
     )
 
 
-def _json_default(obj):
-    if hasattr(obj, "item"):  # numpy scalars
-        return obj.item()
-    if isinstance(obj, (tuple, set, frozenset)):
-        return list(obj)
-    return str(obj)
+def _json(obj) -> str:
+    """JSON text in skidmc's one encoding (:func:`skidmc.workflows.reporting.dumps`: NaN as
+    null, infinities as "inf"/"-inf")."""
+    from skidmc.workflows.reporting import dumps
+
+    return dumps(obj, indent=2).rstrip("\n")
 
 
 def _unit_label(unit: str) -> str:
@@ -115,7 +114,7 @@ def _cmd_presets(args: argparse.Namespace) -> int:
             }
             for name, scene in scenes.items()
         }
-        print(json.dumps(out, indent=2))
+        print(_json(out))
         return 0
     blocks = []
     for name, scene in scenes.items():
@@ -147,9 +146,9 @@ def _cmd_materials(args: argparse.Namespace) -> int:
     si = {m.name: {key: to_si(key, text, SI_UNITS[key]) for key, text in m.values.items()}
           for m in materials}
     if args.json:
-        print(json.dumps({m.name: {"description": m.description, "values": m.values,
-                                   "si": si[m.name], "source": m.source, "spread": m.spread}
-                          for m in materials}, indent=2))
+        print(_json({m.name: {"description": m.description, "values": m.values,
+                              "si": si[m.name], "source": m.source, "spread": m.spread}
+                     for m in materials}))
         return 0
     rows = [("name", *(f"{key.split('.')[1]} [{SI_UNITS[key]}]" for key in TARGET_KEYS),
              "description")]
@@ -232,7 +231,7 @@ def _cmd_height(args: argparse.Namespace) -> int:
         print(f"skidmc height: warning: {line}; the model was not made for it and the "
               "height may mean nothing", file=sys.stderr)
     if args.json:
-        print(json.dumps(report, indent=2, default=_json_default))
+        print(_json(report))
         return 0
 
     print(_height_text(report, result.censored, args, overrides))
@@ -552,7 +551,9 @@ def _add_plan_parser(subparsers) -> None:
                 factor = 1.0
                 if column is None and f"height_{other}" in rows[0]:
                     column = f"height_{other}"
-                    factor = 0.3048 if other == "ft" else 1 / 0.3048
+                    from skidmc.scene.units import FOOT
+
+                    factor = FOOT if other == "ft" else 1 / FOOT
                 if column is None:
                     raise ValueError(f"{args.drops}: needs a column height_ft, height_m or "
                                      f"height; has {', '.join(rows[0])}")
@@ -585,8 +586,7 @@ def _add_plan_parser(subparsers) -> None:
             print(f"skidmc plan: error: {err}", file=sys.stderr)
             return 2
         if args.json:
-            print(json.dumps({**asdict(result), "expected_gain": result.expected_gain},
-                             indent=2))
+            print(_json({**asdict(result), "expected_gain": result.expected_gain}))
             return 0
         u = args.units
         name = "H50" if args.p == 0.5 else f"H{100 * args.p:g}"

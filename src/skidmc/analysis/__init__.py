@@ -11,7 +11,8 @@ the runners that orchestrate studies are :mod:`skidmc.workflows`. Modules:
 - :mod:`~skidmc.analysis.sensitivity`: Sobol' indices with bootstrap intervals, groups, Morris;
 - :mod:`~skidmc.analysis.rare_events` and :mod:`~skidmc.analysis.hazard`: rare-event
   probabilities and the drop-height hazard estimator;
-- :mod:`~skidmc.analysis.report`: what ``skidmc report`` writes.
+- :mod:`~skidmc.analysis.report`: what ``skidmc report`` says about an ensemble, computed
+  (written by :mod:`skidmc.workflows.reporting`).
 
 Figures are drawn by functions that take a matplotlib ``ax``; nothing here imports matplotlib at
 import time.

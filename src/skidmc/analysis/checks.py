@@ -1,4 +1,5 @@
-"""Argument checks shared by the analysis modules (gonogo, rare_events, hazard, sensitivity).
+"""Argument checks shared by the analysis modules (gonogo, rare_events, hazard, sensitivity,
+posterior, planning).
 
 Every bad argument of the analysis layer raises a :class:`ValueError` whose message names the
 argument and shows its value, ``"{name} = {value!r}: {reason}"``, so a user sees at once what to

@@ -19,7 +19,8 @@ from importlib import resources
 
 import numpy as np
 import xarray as xr
-from scipy.constants import foot
+
+from skidmc.scene.units import FOOT
 
 __all__ = [
     "DROP_SERIES",
@@ -58,7 +59,7 @@ DROP_SERIES = {
     "gold": ("gold_drops.csv", None),
 }
 
-_UNIT_FACTORS = {"ft": 1.0, "m": foot}  # from feet; scipy.constants.foot = 0.3048 m exactly
+_UNIT_FACTORS = {"ft": 1.0, "m": FOOT}  # from feet [m per ft]
 
 
 def _height_factor(units: str) -> float:

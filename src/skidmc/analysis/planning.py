@@ -48,6 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
+from skidmc.analysis.checks import bad as _bad
 from skidmc.analysis.posterior import NormalPrior, _build_grid, _Grid
 
 __all__ = [
@@ -62,10 +63,6 @@ __all__ = [
 ]
 
 _Z90 = float(special.ndtri(0.95))
-
-
-def _bad(name, value, reason) -> ValueError:
-    return ValueError(f"{name} = {value!r}: {reason}")
 
 
 # --------------------------------------------------------------------------------------------

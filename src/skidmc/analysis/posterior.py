@@ -39,6 +39,9 @@ import numpy as np
 import xarray as xr
 from scipy import optimize, special
 
+from skidmc.analysis.checks import bad as _bad
+from skidmc.scene.units import FOOT
+
 __all__ = [
     "NormalPrior",
     "ProbitPosterior",
@@ -63,10 +66,6 @@ PHYSICS_LOG_SIGMA_SD = 0.5
 #: spreads that put the report's mixed quartz drops at 1.5 and 2.12 ft within a sigma or two).
 VAGUE_LOCATION_SD = math.log(10.0)
 VAGUE_LOG_SIGMA = (math.log(0.3), 1.0)
-
-
-def _bad(name, value, reason) -> ValueError:
-    return ValueError(f"{name} = {value!r}: {reason}")
 
 
 def _normal_pair(name, value) -> tuple[float, float]:
@@ -187,7 +186,7 @@ def physics_prior(experiment: str, *, units: str = "ft", discrepancy_sd: float =
         raise _bad("experiment", experiment, f"no physics prior; choose from {', '.join(known)}")
     ln_h50 = np.array([float(r["ln_h50_ft"]) for r in mine])
     sigma = np.array([float(r["sigma_ln"]) for r in mine])
-    shift = 0.0 if units == "ft" else math.log(0.3048)
+    shift = 0.0 if units == "ft" else math.log(FOOT)
     sd = math.hypot(float(np.std(ln_h50, ddof=1)), discrepancy_sd)
     source = (f"model prior predictive, {mine[0]['scene']} scene of paper-series1 "
               f"({len(mine)} epistemic draws)"

@@ -29,6 +29,7 @@ import numpy as np
 import xarray as xr
 from scipy.special import ndtr, ndtri
 
+from skidmc.analysis.checks import bad as _bad
 from skidmc.analysis.checks import check_confidence as _check_confidence
 from skidmc.analysis.checks import check_seed as _check_seed
 
@@ -438,7 +439,7 @@ def sobol_stable(res: xr.Dataset, threshold: float = 0.1, half_width: float = 0.
     """
     for name, value in (("threshold", threshold), ("half_width", half_width)):
         if not isinstance(value, numbers.Real) or not value >= 0:
-            raise ValueError(f"{name} = {value!r}: expected a number >= 0")
+            raise _bad(name, value, "expected a number >= 0")
     for index in indices:
         width = interval_half_width(res, index)
         relevant = res[f"{index}_high"] > threshold
@@ -546,9 +547,9 @@ def grow_until_stable(problem: dict, evaluate: Callable[[np.ndarray], np.ndarray
 
     for name, value in (("n_start", n_start), ("n_max", n_max)):
         if not _is_power_of_two(value):
-            raise ValueError(f"{name} = {value!r}: expected a power of 2 >= 2")
+            raise _bad(name, value, "expected a power of 2 >= 2")
     if n_max < n_start:
-        raise ValueError(f"n_max = {n_max!r}: expected >= n_start ({n_start})")
+        raise _bad("n_max", n_max, f"expected >= n_start ({n_start})")
     if "bounds" not in problem:
         raise ValueError(f"problem = {problem!r}: missing the key 'bounds' needed to draw the "
                          "design")

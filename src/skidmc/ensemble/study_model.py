@@ -1,8 +1,11 @@
-"""The data model of a study: what :func:`skidmc.ensemble.study.load_study` returns.
+"""The data model of a study: what the study loaders return.
 
-Frozen dataclasses (:class:`Study`, its :class:`StudyScene` s, :class:`Distribution` s,
-:class:`Correlation` s, :class:`DesignSpec` and :class:`SolverOptions`) and the errors
-(:class:`StudyError`). The file format and its validation are :mod:`skidmc.ensemble.study`.
+Frozen dataclasses: :class:`Study` (:func:`skidmc.ensemble.study.load_study`), its
+:class:`StudyScene` s, :class:`Distribution` s, :class:`Correlation` s, :class:`DesignSpec` and
+:class:`SolverOptions`; :class:`HazardStudy` (:func:`skidmc.ensemble.hazard_study.
+load_hazard_study`) with its :class:`Surface` s and :class:`EstimatorOptions`; and the errors
+(:class:`StudyError`). The file formats, and the validation that builds these, are the
+pydantic models of :mod:`skidmc.ensemble.study_schema`.
 """
 
 from __future__ import annotations
@@ -17,10 +20,16 @@ import numpy as np
 import scipy.stats
 
 from skidmc.errors import SkidmcError
-from skidmc.scene import Scene
+from skidmc.scene import NUMERIC_KEYS, Scene
 
 __all__ = [
+    "BILLET_KEYS",
     "DESIGN_METHODS",
+    "ESTIMATOR_METHODS",
+    "EstimatorOptions",
+    "HazardStudy",
+    "REGIMES",
+    "Surface",
     "KINDS",
     "EXTRA_KEYS",
     "RATE_AT_REFERENCE",
@@ -161,6 +170,19 @@ class Distribution:
         """Values at the quantiles `u`; times `nominal` when relative [SI unit of the key]."""
         x = self.frozen.ppf(u)
         return x * nominal if self.relative else x
+
+    def scaled(self, factor: float):
+        """The frozen distribution of ``factor`` x X [SI]: its loc and scale times `factor` (a
+        relative distribution on its nominal value, a drop height with its median moved)."""
+        params = dict(self.params)
+        params["loc"] = params.get("loc", 0.0) * factor
+        params["scale"] = params.get("scale", 1.0) * factor
+        return getattr(scipy.stats, self.name)(**params)
+
+    def physical(self, nominal: float):
+        """The frozen distribution of the input's values [SI]: a relative one scaled by
+        `nominal` (the scene's value), an absolute one as it is."""
+        return self.scaled(nominal) if self.relative else self.frozen
 
     def describe(self) -> str:
         """``"lognorm(s=0.2) x nominal"``-style one-liner."""
@@ -393,3 +415,160 @@ def check_n(file: str, method: str, n: object, key: str) -> None:
     if method in ("sobol", "saltelli") and n & (n - 1):
         raise StudyError(file, key, n, f"the {method} design needs a power of 2 (keeps the "
                          f"Sobol sequence balanced): e.g. {1 << (int(n) - 1).bit_length()}")
+
+
+# --- the hazard kind ([hazard] files, skidmc.ensemble.hazard_study) ---------------------------
+
+#: Keys a ``[hazard.billet.KEY]`` table may sample (aleatory: lot to lot, billet to billet).
+BILLET_KEYS: tuple[str, ...] = (
+    "flow_stress", "billet_mass", "billet_diameter", "initial_temperature",
+    *(k for k in NUMERIC_KEYS if k.startswith("he.")),
+)
+
+#: Estimators of :func:`skidmc.analysis.hazard.drop_height_probability`.
+ESTIMATOR_METHODS: tuple[str, ...] = ("is", "mc")
+
+#: Regimes of a surface: the report's rigid target, a target that yields under the billet
+#: (contact pressure min(sigma, p_t), docs/model.md "Targets softer than the billet"), or one
+#: the model does not describe (its weight is an unmodelled share of the accidents).
+REGIMES: tuple[str, ...] = ("rigid", "yielding", "outside")
+
+@dataclasses.dataclass(frozen=True)
+class Surface:
+    """One surface an accident may strike.
+
+    Attributes
+    ----------
+    material : str
+        Registry name (:mod:`skidmc.scene.materials`).
+    weight : float
+        Share of accidents on this surface [1].
+    source : str
+        Where the weight comes from.
+    friction : Distribution
+        Apparent friction coefficient mu on this surface [1].
+    scene : Scene
+        The study's scene with this material as the target.
+    regime : {"rigid", "yielding", "outside"}
+        How the model treats the surface (:data:`REGIMES`): rigid (hardness above the billet's
+        flow stress), yielding (below it: contact pressure p_t) or outside the model (not run;
+        its weight is reported as an unmodelled share).
+    regime_note : str
+        The regime in words, with the hardness and its source (or why it is outside).
+    """
+
+    material: str
+    weight: float
+    source: str
+    friction: Distribution
+    scene: Scene
+    regime: str = "rigid"
+    regime_note: str = ""
+
+    @property
+    def modelled(self) -> bool:
+        """Whether the model describes this surface (rigid or yielding)."""
+        return self.regime != "outside"
+
+
+@dataclasses.dataclass(frozen=True)
+class EstimatorOptions:
+    """How the probability is estimated (:func:`skidmc.analysis.hazard.drop_height_probability`).
+
+    Attributes
+    ----------
+    method : {"is", "mc"}
+        Structured estimator with importance sampling, or conditional Monte Carlo.
+    target_cov : float
+        Target coefficient of variation of each pooled per-surface estimate [1].
+    max_runs : int
+        Budget of solver runs of one estimate (one surface, one epistemic draw or pooled).
+    seed : int
+        Root seed (>= 0) of every estimate's random stream.
+    epistemic_draws : int
+        Outer draws of the epistemic inputs (Latin hypercube); 0 for no epistemic loop.
+    epistemic_target_cov : float
+        Target coefficient of variation of each draw's per-surface estimates [1].
+    """
+
+    method: str = "is"
+    target_cov: float = 0.1
+    max_runs: int = 20_000
+    seed: int = 0
+    epistemic_draws: int = 20
+    epistemic_target_cov: float = 0.2
+
+
+@dataclasses.dataclass(frozen=True)
+class HazardStudy:
+    """A validated hazard study (build with :func:`load_hazard_study`).
+
+    Attributes
+    ----------
+    name, description : str
+    scene : Scene
+        The billet, HE, kinetics and configuration (the target is each surface's).
+    drop_height : Distribution
+        Drop height [m] (key ``"drop_height"``).
+    angle : Distribution
+        Impact angle phi [deg].
+    surfaces : tuple of Surface
+    billet : dict
+        Key -> :class:`Distribution`, aleatory inputs of the billet population.
+    epistemic : dict
+        Key -> :class:`Distribution`, fixed but unknown inputs.
+    estimator : EstimatorOptions
+    solver : SolverOptions
+    text, sha256, file : str
+        The file's text, its SHA-256 and where it was read from.
+    assumptions : tuple of str
+        The study's judgements in words (``assumptions = [...]``), printed in the summary.
+    alternative_configuration : str or None
+        A second geometry (``[hazard.alternatives] configuration``) under which P is also
+        estimated (pooled, no epistemic loop).
+    angle_alternatives : tuple of Distribution
+        The angle distribution at other scales (``[hazard.alternatives] angle_scales``): P at
+        each from the same samples, reweighted.
+    """
+
+    name: str
+    description: str
+    scene: Scene
+    drop_height: Distribution
+    angle: Distribution
+    surfaces: tuple[Surface, ...]
+    billet: Mapping[str, Distribution]
+    epistemic: Mapping[str, Distribution]
+    estimator: EstimatorOptions
+    solver: SolverOptions
+    text: str
+    sha256: str
+    file: str
+    assumptions: tuple[str, ...] = ()
+    alternative_configuration: str | None = None
+    angle_alternatives: tuple[Distribution, ...] = ()
+
+    @property
+    def modelled_surfaces(self) -> tuple[Surface, ...]:
+        """The surfaces the model describes (rigid or yielding), in file order."""
+        return tuple(s for s in self.surfaces if s.modelled)
+
+    @property
+    def unmodelled_weight(self) -> float:
+        """Share of accidents on surfaces outside the model [1]."""
+        return math.fsum(s.weight for s in self.surfaces if not s.modelled)
+
+    @property
+    def aleatory_keys(self) -> tuple[str, ...]:
+        """Sampled scene inputs that vary from accident to accident: mu, angle, the billet's."""
+        return ("mu", "angle", *self.billet)
+
+    @property
+    def epistemic_keys(self) -> tuple[str, ...]:
+        """The epistemic inputs, in file order."""
+        return tuple(self.epistemic)
+
+    @property
+    def materials(self) -> tuple[str, ...]:
+        """The surfaces' material names, in file order."""
+        return tuple(s.material for s in self.surfaces)

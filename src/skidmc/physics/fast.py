@@ -437,7 +437,7 @@ def fast_height_core(mu, flow_stress, billet_mass, billet_diameter, angle, tilt,
     ln_z = math.log(prefactor)
     rise_ad = heat_of_reaction / he_heat_capacity  # dT_ad = Q / c1 [K]; 0: inert HE
     # Melting only where the full model models it: T_m below the runaway temperature, i.e. the
-    # adiabatic induction time at T_m above the runaway fraction of t_exit (skidmc.model).
+    # adiabatic induction time at T_m above the runaway fraction of t_exit (skidmc.solver.model).
     melt_rise = 0.0
     melt_rel = he_melting_point - t0
     if he_heat_of_fusion > 0.0 and melt_rel > 0.0:

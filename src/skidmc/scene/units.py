@@ -26,7 +26,12 @@ import pint
 from skidmc.errors import SceneError, UnitError
 from skidmc.scene.keys import HARDNESS_WORDS, INFINITE_OK
 
-__all__ = ["from_si", "read_si", "to_si", "ureg"]
+__all__ = ["FOOT", "from_si", "read_si", "to_si", "ureg"]
+
+#: The international foot [m], exact by definition (1959): the one definition in skidmc, for
+#: the report's heights in feet. Written as the exact decimal: pint's and scipy.constants' foot
+#: (12 x 0.0254) round to 0.30479999999999996.
+FOOT = 0.3048
 
 #: The package's single unit registry. Offset units are *not* auto-converted in products:
 #: with ``autoconvert_offset_to_baseunit=True`` pint would read ``cal/g/degC`` as per 274.15 K.

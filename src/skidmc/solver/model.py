@@ -198,7 +198,7 @@ class Resolution:
 #: on the critical height is first order in w (below), and the number of time steps grows
 #: steeply as w shrinks (each HE cell's melting kink must be resolved: 3,356 steps at level 3
 #: with w = 0.25 K, 729 with w = 2 K). The solver therefore picks w from its tolerance
-#: (skidmc.solver.melt_width_for_rtol) and keeps it the same at every level of one search.
+#: (skidmc.solver.plan.melt_width_for_rtol) and keeps it the same at every level of one search.
 MELT_WIDTH_LEVEL0 = 2.0
 
 #: Bound on the critical height's relative bias per kelvin of melting width [1/K]: measured

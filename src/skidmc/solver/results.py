@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass, field
 
 __all__ = ["FT", "HeightResult"]
 
-FT = 0.3048  # [m per ft], exact
+from skidmc.scene.units import FOOT as FT  # [m per ft]
 
 
 @dataclass

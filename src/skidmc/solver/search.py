@@ -83,7 +83,8 @@ MAX_ADAPTIVE_ROUNDS = 8
 MELT_SHIFT_FACTOR = 2.5
 
 #: Model fidelity tiers: "full" (the report's model, converged to rtol) and "fast" (the
-#: reduced model of :mod:`skidmc.fast`, ~10-20 us per height, a few percent off the full model).
+#: reduced model of :mod:`skidmc.solver.fast`, ~10-20 us per height, a few percent off the full
+#: model).
 TIERS = ("full", "fast")
 
 #: Scatter of the fast tier's ln H about the full model's where sliding stops [1], the prior's
@@ -699,7 +700,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     history = sorted((math.exp(x), m) for x, m in cache.items())
     # Censored results report the bound itself, exactly as given.
     height = {"above": h_max, "below": h_min}.get(censored, math.exp(x_root))
-    # Validity at the height found (indentation depth, sliding distance): skidmc.model.
+    # Validity at the height found (indentation depth, sliding distance): skidmc.solver.model.
     base["flags"] = model.flags + model.height_flags(height)
     return HeightResult(critical_height=height, censored=censored,
                         evaluations=len(cache) - n_known + coarse_evaluations, history=history,

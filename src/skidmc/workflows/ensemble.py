@@ -2,8 +2,9 @@
 
 ``skidmc run`` draws the design and writes ``results/<name>/ensemble.h5`` through
 :func:`skidmc.ensemble.run.execute_study` (resumable, checksummed, up to date when the study and
-n match); ``skidmc report`` analyses it (:func:`skidmc.analysis.report.write_report`). This
-module is also the reference for a kind's interface (:mod:`skidmc.workflows.registry`).
+n match); ``skidmc report`` analyses it and writes the report
+(:func:`skidmc.workflows.reporting.ensemble.write_report`). This module is also the
+reference for a kind's interface (:mod:`skidmc.workflows.registry`).
 """
 
 from __future__ import annotations
@@ -28,17 +29,11 @@ def detect(doc: dict) -> bool:
 
 
 def load(path):
-    """The validated study (:func:`skidmc.ensemble.study.load_study`); a saltelli design with
-    ``n_max`` is the sobol kind's, refused here when the file says ``kind = "ensemble"``."""
+    """The validated study (:func:`skidmc.ensemble.study.load_study`, the ensemble kind's
+    model: a saltelli design with ``n_max`` is the sobol kind's, refused)."""
     from skidmc.ensemble.study import load_study
-    from skidmc.ensemble.study_model import StudyError
 
-    study = load_study(path)
-    if study.design.n_max:
-        raise StudyError(study.file, "design.n_max", study.design.n_max,
-                         "grows N until the Sobol' indices are stable: only for kind = 'sobol' "
-                         "(drop the kind line, or n_max)")
-    return study
+    return load_study(path, kind="ensemble")
 
 
 def default_out(study) -> Path:
@@ -104,8 +99,10 @@ def report(target, options: ReportOptions) -> Outcome:
 
 def ensemble_report(target, options: ReportOptions, default) -> Outcome:
     """The report of an ensemble file, shared by the kinds that write one (plain, sobol)."""
-    from skidmc.analysis.report import write_report
+    from skidmc.analysis.report import EPISTEMIC_BAND
     from skidmc.ensemble.storage import open_ensemble
+    from skidmc.workflows import reporting
+    from skidmc.workflows.reporting.ensemble import write_report
 
     if isinstance(target, Path) and target.suffix != ".toml":
         path = target
@@ -137,8 +134,8 @@ def ensemble_report(target, options: ReportOptions, default) -> Outcome:
             printed.append(f"{a.scene}: too few exact critical heights for a fit")
             continue
         est, low, high = a.predicted_h50()
-        band = ("epistemic 5-95 %" if a.epistemic is not None
-                else f"{confidence:.0%} interval")
+        band = (f"epistemic {reporting.band(EPISTEMIC_BAND)}" if a.epistemic is not None
+                else f"{reporting.level(confidence)} interval")
         line = (f"{a.scene}: H50 {est:.3g} ft ({band} {low:.3g} to {high:.3g}), sigma ln H "
                 f"{a.fit.sigma:.2f}; {a.fit.verdict}")
         if a.experiment is not None:

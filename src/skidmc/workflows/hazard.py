@@ -59,15 +59,12 @@ from skidmc.analysis.hazard import DropHeightResult, drop_height_probability
 from skidmc.analysis.rare_events import CONFIDENCE, GaussianCopulaTransform
 from skidmc.ensemble.hazard_study import HazardStudy, Surface, load_hazard_study
 from skidmc.ensemble.study_model import (
-    EXTRA_KEYS,
     RATE_AT_REFERENCE,
     U_TAIL,
     Distribution,
     StudyScene,
     prefactor_from_rate,
 )
-from skidmc.scene import SI_UNITS
-from skidmc.scene.units import from_si
 from skidmc.workflows.replay import RecordedSolver
 
 __all__ = [
@@ -114,9 +111,6 @@ FRAGILITY_FACTORS = tuple(float(f) for f in np.geomspace(0.25, 4.0, 9))
 #: (results/benchmarks/fast_tier.md, 341 scenes): what a study run on the fast tier carries.
 FAST_TIER_P90_ERROR = 0.045
 
-# Display units of the summary (SI inside).
-_DISPLAY_UNITS = {"flow_stress": "psi", "billet_mass": "lb", "billet_diameter": "in",
-                  "drop_height": "m", "kinetics.heat_of_reaction": "cal/g"}
 _Z = float(stats.norm.isf((1 - CONFIDENCE) / 2))
 _MAX_REASONS = 10
 
@@ -248,6 +242,16 @@ class HazardResult:
         ``rerun`` (``probability``, ``cov``, ``interval``, ``runs``: a direct estimate with
         fresh samples) where the reweighting does not cover the alternative
         (:data:`RERUN_COV`, :data:`RERUN_UNCOVERED`).
+    confidence : float
+        Coverage of `interval` and of every sampling interval of the result [1].
+    band_quantiles : tuple of float
+        The quantiles of `band` and of every epistemic band of the result [1].
+    design_medians : dict
+        Input -> median of its distribution on the design point's surface [SI] (beside the
+        design point in the summary).
+    rerun_rule : dict
+        When P at another angle scale was rerun: ``cov`` (:data:`RERUN_COV`), ``uncovered``
+        (:data:`RERUN_UNCOVERED`), ``angle_max_deg`` (:data:`ANGLE_MAX`).
     files : tuple of str
         Files written.
     """
@@ -275,6 +279,10 @@ class HazardResult:
     conditional_modelled: float = math.nan
     alternative: dict = dataclasses.field(default_factory=dict)
     angle_scales: list = dataclasses.field(default_factory=list)
+    confidence: float = CONFIDENCE
+    band_quantiles: tuple[float, float] = BAND
+    design_medians: dict = dataclasses.field(default_factory=dict)
+    rerun_rule: dict = dataclasses.field(default_factory=dict)
     files: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
@@ -285,7 +293,7 @@ class HazardResult:
         out["epistemic_covs"] = self.epistemic_covs.tolist()
         out["epistemic_draws"] = {k: np.asarray(v).tolist()
                                   for k, v in self.epistemic_draws.items()}
-        from skidmc.analysis.report import json_ready
+        from skidmc.workflows.reporting import json_ready
 
         return json_ready(out)
 
@@ -308,20 +316,6 @@ class _Tally:
         for reason in reasons:
             if reason not in self.reasons and len(self.reasons) < _MAX_REASONS:
                 self.reasons.append(str(reason))
-
-
-def _physical(d: Distribution, nominal: float):
-    """The frozen distribution of d's values [SI]: a relative one scaled by `nominal`."""
-    return _scaled(d, nominal) if d.relative else d.frozen
-
-
-def _scaled(d: Distribution, factor: float):
-    """d's frozen distribution with its loc and scale times `factor` (the distribution of
-    factor x X: a relative one on its nominal value, a drop height with its median moved)."""
-    params = dict(d.params)
-    params["loc"] = params.get("loc", 0.0) * factor
-    params["scale"] = params.get("scale", 1.0) * factor
-    return getattr(stats, d.name)(**params)
 
 
 class _CriticalHeight:
@@ -408,7 +402,7 @@ def _marginals(study: HazardStudy, surface: Surface, keys: tuple[str, ...]) -> l
             d = study.angle
         else:
             d = study.billet.get(key) or study.epistemic[key]
-        out.append(_physical(d, _nominal(study, surface, key) if d.relative else 1.0))
+        out.append(d.physical(_nominal(study, surface, key) if d.relative else 1.0))
     return out
 
 
@@ -722,13 +716,17 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
         unmodelled_weight=study.unmodelled_weight,
         bounds=(probability, min(1.0, probability + study.unmodelled_weight)),
         conditional_modelled=probability / (1.0 - study.unmodelled_weight),
-        alternative=alternative, angle_scales=angle_scales,
+        alternative=alternative, angle_scales=angle_scales, confidence=CONFIDENCE,
+        band_quantiles=BAND, design_medians=_medians(study, design["surface"]),
+        rerun_rule={"cov": RERUN_COV, "uncovered": RERUN_UNCOVERED, "angle_max_deg": ANGLE_MAX},
     )
     result = dataclasses.replace(result, surfaces=all_surfaces)
     if recorder is not None and not replay_only:
         log.complete(recorder.calls)
     if out_dir is not None:
-        files = _write(result, study, Path(out_dir))
+        from skidmc.workflows.reporting.hazard import write_hazard_report
+
+        files = write_hazard_report(result, study, Path(out_dir))
         result = dataclasses.replace(result, files=tuple(str(f) for f in files))
     return result
 
@@ -1013,7 +1011,7 @@ def _fragility(study: HazardStudy, pooled: list[_Estimate], outer) -> dict[str, 
     out: dict[str, list[float]] = {"median": [], "probability": [], "cov": [], "band_low": [],
                                    "band_high": []}
     for factor in FRAGILITY_FACTORS:
-        drop = _scaled(study.drop_height, factor)
+        drop = study.drop_height.scaled(factor)
         p, se = _reweighted(strata, drop)
         out["median"].append(median * factor)
         out["probability"].append(p)
@@ -1024,310 +1022,7 @@ def _fragility(study: HazardStudy, pooled: list[_Estimate], outer) -> dict[str, 
     return out
 
 
-# --------------------------------------------------------------------------------------------
-# output
-# --------------------------------------------------------------------------------------------
-
-
-def _unit(key: str) -> str:
-    if key in SI_UNITS:
-        return SI_UNITS[key]
-    if key in EXTRA_KEYS:
-        return EXTRA_KEYS[key][0]
-    return "m"
-
-
-def _shown(key: str, value: float) -> str:
-    """A value with its unit, in the summary's display unit."""
-    unit = _unit(key)
-    if key in _DISPLAY_UNITS:
-        return f"{from_si(value, unit, _DISPLAY_UNITS[key]):.4g} {_DISPLAY_UNITS[key]}"
-    return f"{value:.4g}" + ("" if unit in ("1", "-") else f" {unit}")
-
-
-def _write(result: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
-    out.mkdir(parents=True, exist_ok=True)
-    files = [out / "summary.json", out / "summary.md", out / "fragility.csv"]
-    data = result.to_dict()
-    data["study"] = {"file": study.file, "sha256": study.sha256}
-    data.pop("files", None)
-    data.pop("wall_time", None)  # machine-dependent: the summary stays reproducible
-    files[0].write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
-    files[1].write_text(_markdown(result, study), encoding="utf-8")
-    f = result.fragility
-    lines = ["median_drop_height_m,probability,cov,band_low,band_high"]
-    lines += [f"{m:.6g},{p:.6g},{c:.4g},{lo:.6g},{hi:.6g}" for m, p, c, lo, hi in
-              zip(f["median"], f["probability"], f["cov"], f["band_low"], f["band_high"])]
-    files[2].write_text("\n".join(lines) + "\n", encoding="utf-8")
-    files += _figures(result, study, out)
-    return files
-
-
-def _markdown(r: HazardResult, study: HazardStudy) -> str:
-    lo, hi = r.interval
-    lines = [
-        f"# Hazard study `{r.name}`",
-        "",
-        f"Study file `{Path(study.file).name}` (sha256 {study.sha256[:12]}). "
-        f"{study.description}",
-        "",
-        "## Probability of a reaction per accident",
-        "",
-        f"- **P = {r.probability:.3g}** per accident, 95 % interval [{lo:.3g}, {hi:.3g}], "
-        f"CoV {r.cov:.3f} (epistemic inputs averaged in: the pooled estimate)"
-        + (": accidents on the surfaces the model describes that end in a reaction."
-           if r.unmodelled_weight > 0 else "."),
-    ]
-    outside = [s for s in r.surfaces if s.regime == "outside"]
-    if outside:
-        names = ", ".join(f"{s.material} ({s.weight:.0%} of accidents)" for s in outside)
-        lines += [
-            f"- **Outside the model: {names}.** These accidents are not in P and not counted "
-            "as \"no reaction\": the model says nothing about them. The probability per "
-            f"accident over all surfaces lies in **[{r.bounds[0]:.3g}, {r.bounds[1]:.3g}]** "
-            f"(P, and P plus the unmodelled share {r.unmodelled_weight:.3g}, as if every "
-            "unmodelled accident reacted). Were they to react as often as the modelled ones, "
-            f"it would be P / (1 - {r.unmodelled_weight:.3g}) = {r.conditional_modelled:.3g} "
-            "(P(reaction | a modelled surface)); that is a judgement, not a result.",
-        ]
-    if r.epistemic_probabilities.size:
-        e = r.epistemic_probabilities
-        lines.append(
-            f"- Epistemic band (kinetics held at each of {e.size} Latin-hypercube draws): "
-            f"5-95 % [{r.band[0]:.3g}, {r.band[1]:.3g}], median {np.median(e):.3g}, mean "
-            f"{e.mean():.3g} (the pooled P estimates this mean); draws' own CoV at most "
-            f"{np.max(r.epistemic_covs):.2f}.")
-    lines += [
-        f"- Solver runs: {r.runs['total']} ({r.runs['pooled']} pooled, {r.runs['epistemic']} "
-        f"epistemic loop, {r.runs.get('alternatives', 0)} geometry and angle alternatives), "
-        f"tier `{study.solver.tier}`, rtol {study.solver.rtol:g}; "
-        f"failures: {r.failed}.",
-        f"- Solver tolerance: -d ln P / d ln H_c = {r.elasticity:.1f}, so an error of rtol = "
-        f"{study.solver.rtol:g} on every H_c would move P by about "
-        f"{r.elasticity * study.solver.rtol:.0%}.",
-        "",
-        "## Per surface (pooled)",
-        "",
-        "| surface | regime | weight | P(reaction given surface) | share of P per accident | "
-        "95 % interval of share | CoV | runs | failed |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
-    for s in r.surfaces:
-        if s.regime == "outside":
-            lines.append(f"| {s.material} | outside the model | {s.weight:g} | not modelled | "
-                         f"not in P (unmodelled share {s.weight:g}) | - | - | 0 | - |")
-            continue
-        lines.append(f"| {s.material} | {s.regime} | {s.weight:g} | {s.conditional:.3g} | "
-                     f"{s.share:.3g} | [{s.interval[0]:.3g}, {s.interval[1]:.3g}] | "
-                     f"{s.cov:.3f} | {s.runs} | {s.failed} |")
-    lines += ["", f"The shares of the modelled surfaces sum to P = {r.probability:.3g}.", "",
-              "Regime of each surface (the contact pressure the model uses: the billet's flow "
-              "stress sigma on a rigid target, min(sigma, p_t) on one that yields at p_t; "
-              "docs/model.md, \"Targets softer than the billet\"):", ""]
-    lines += [f"- **{s.material}**: {s.regime_note}" for s in r.surfaces]
-    if r.alternative:
-        a = r.alternative
-        alo, ahi = a["interval"]
-        lines += ["", f"## Geometry: {study.scene.configuration} drop against "
-                  f"{a['configuration']}", "",
-                  f"The headline uses the {study.scene.configuration} geometry (report Sec. "
-                  "II.C: the billet falls onto a surface inclined at the impact angle, tilt = "
-                  f"angle). Under the {a['configuration']} geometry (the billet level, tilt = "
-                  "0: a billet carried level that meets the floor obliquely) the same "
-                  f"population gives **P = {a['probability']:.3g}** [{alo:.3g}, {ahi:.3g}] "
-                  f"(CoV {a['cov']:.3f}, pooled, {a['runs']} solver runs, no epistemic loop).",
-                  "", f"| surface | P(reaction given surface), {study.scene.configuration} | "
-                  f"P(reaction given surface), {a['configuration']} |", "|---|---|---|"]
-        for s in r.surfaces:
-            if s.material in a["surfaces"]:
-                lines.append(f"| {s.material} | {s.conditional:.3g} | "
-                             f"{a['surfaces'][s.material]:.3g} |")
-        lines += ["", f"| | {study.scene.configuration} | {a['configuration']} |",
-                  "|---|---|---|",
-                  f"| P per accident (modelled surfaces) | {r.probability:.3g} | "
-                  f"{a['probability']:.3g} |"]
-    if r.angle_scales:
-        lines += ["", "## The angle distribution's scale", "",
-                  "P at other plausible scales of the angle distribution, from the same solver "
-                  "samples reweighted by the ratio of the angle densities f_alt(phi) / f(phi) "
-                  "(no extra solver run; unbiased where the samples cover the alternative, the "
-                  "CoV says how well; the epistemic band likewise from the draws' samples, "
-                  "so it is no better covered than the reweighted P on its row). "
-                  "\"Beyond sampled range\": the alternative's probability of angles beyond "
-                  "the study's 1e-9 quantiles, which no sample reached (an upper bound on what "
-                  "the reweighting misses).", "",
-                  f"Where the reweighted CoV exceeds {RERUN_COV:g} or the range the samples "
-                  f"missed holds more than {RERUN_UNCOVERED:g} P, the samples do not cover the "
-                  "alternative: P is then rerun with fresh samples of it (pooled, at the "
-                  "epistemic draws' target CoV, no epistemic loop; angles beyond "
-                  f"{ANGLE_MAX:g} deg clipped to it) and the rerun is the value to use.", "",
-                  "| angle distribution | P per accident, reweighted | CoV | epistemic 5 % | "
-                  "epistemic 95 % | beyond sampled range | P, rerun [95 % interval] |",
-                  "|---|---|---|---|---|---|---|"]
-        for a in r.angle_scales:
-            label = f"half-normal, scale {a['scale_deg']:g} deg" if a["distribution"].startswith(
-                "halfnorm") and a["scale_deg"] is not None else a["distribution"]
-            label += " (the study's)" if a["study"] else ""
-            rerun = a.get("rerun")
-            again = (f"**{rerun['probability']:.3g}** [{rerun['interval'][0]:.3g}, "
-                     f"{rerun['interval'][1]:.3g}] ({rerun['runs']} runs)" if rerun else
-                     "not needed")
-            lines.append(f"| {label} | {a['probability']:.3g} | {a['cov']:.2f} | "
-                         f"{a['band_low']:.3g} | {a['band_high']:.3g} | {a['uncovered']:.2g} | "
-                         f"{again} |")
-    lines += ["",
-              "## Design point: the most likely initiating combination", "",
-              f"Surface **{r.design_point['surface']}**; it reacts from a drop of "
-              f"{r.design_point['critical_height']:.3g} m or more "
-              f"({from_si(r.design_point['critical_height'], 'm', 'ft'):.3g} ft).", "",
-              "| input | design point | median of its distribution | E[U given reaction] |",
-              "|---|---|---|---|"]
-    best = next(e for e in r.surfaces if e.material == r.design_point["surface"])
-    medians = _medians(study, best.material)
-    for key, value in best.design_point.items():
-        lines.append(f"| `{key}` | {_shown(key, value)} | {_shown(key, medians[key])} | "
-                     f"{r.importance[key]:+.2f} |")
-    lines += ["", "E[U given reaction]: the mean normal score of each input over the reactions "
-              "(share-weighted over the surfaces), in standard deviations from its median: the "
-              "inputs that a reaction pulls furthest drive the hazard.", "",
-              "Design point per surface:", "",
-              "| surface | H_c at its design point | ln density (relative) |", "|---|---|---|"]
-    top = max(s.design_log_density for s in r.surfaces)
-    for s in r.surfaces:
-        if s.regime == "outside":
-            lines.append(f"| {s.material} | outside the model (not run) | - |")
-            continue
-        lines.append(f"| {s.material} | {s.design_critical_height:.3g} m | "
-                     f"{s.design_log_density - top:+.1f} |")
-    f = r.fragility
-    lines += ["", "## Fragility: P against the median drop height", "",
-              "The same H_c samples reweighted (no extra solver run); the band from the "
-              f"epistemic draws' samples: it covers the kinetics inputs only "
-              f"({', '.join(study.epistemic_keys) or 'none'}; "
-              f"{study.estimator.epistemic_draws} draws), every other input averaged within "
-              "each draw.", "",
-              "| median drop height | P per accident | CoV | epistemic 5 % | epistemic 95 % |",
-              "|---|---|---|---|---|"]
-    for m, p, c, a, b in zip(f["median"], f["probability"], f["cov"], f["band_low"],
-                             f["band_high"]):
-        lines.append(f"| {m:.3g} m | {p:.3g} | {c:.2f} | {a:.3g} | {b:.3g} |")
-    lines += ["", "## Assumptions", "",
-              "The study's judgements, as its file states them:", ""]
-    lines += [f"- {a}" for a in study.assumptions] or [
-        "- (the study file lists none: `assumptions = [...]` in [hazard])"]
-    lines += ["", "Every sampled input and its source, as the study file gives it:", "",
-              "| input | distribution (parameters in SI: Pa, K, J/kg, 1/s; angle in deg; "
-              "`x nominal`: a factor on the scene's value) | source |", "|---|---|---|",
-              f"| drop height [m] | {study.drop_height.describe()} | "
-              f"{study.drop_height.source} |",
-              f"| impact angle [deg] | {study.angle.describe()} | {study.angle.source} |"]
-    for surf in study.surfaces:
-        lines.append(f"| friction on {surf.material} | {surf.friction.describe()} | "
-                     f"{surf.friction.source} |")
-    for part, group in (("billet", study.billet), ("epistemic", study.epistemic)):
-        for key, d in group.items():
-            lines.append(f"| `{key}` ({part}) | {d.describe()} | {d.source} |")
-    lines += ["", "| surface | weight | source of the weight |", "|---|---|---|"]
-    lines += [f"| {surf.material} | {surf.weight:g} | {surf.source} |"
-              for surf in study.surfaces]
-    lines += ["", f"Configuration of the headline: {study.scene.configuration}; epistemic "
-              f"draws: {study.estimator.epistemic_draws}; solver tolerance rtol "
-              f"{study.solver.rtol:g} (moves P by about {r.elasticity * study.solver.rtol:.0%}, "
-              "above).", "", "## Run notes", ""]
-    lines += [f"- {n}" for n in r.notes] or ["- none (no failures, every estimate reached "
-                                              "its target CoV)"]
-    if r.failure_reasons:
-        lines += ["", "Failure reasons:", ""] + [f"- {x}" for x in r.failure_reasons]
-    lines += ["", "Figures: `fragility.png`, `importance.png`. Data: `summary.json`, "
-              "`fragility.csv`.", ""]
-    return "\n".join(lines)
-
-
 def _medians(study: HazardStudy, material: str) -> dict[str, float]:
     surface = next(s for s in study.surfaces if s.material == material)
     keys = (*study.aleatory_keys, *study.epistemic_keys)
     return {k: float(m.median()) for k, m in zip(keys, _marginals(study, surface, keys))}
-
-
-def _figures(r: HazardResult, study: HazardStudy, out: Path) -> list[Path]:
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:  # pragma: no cover - matplotlib is in the figures extra
-        warnings.warn("matplotlib is not installed: hazard figures skipped", RuntimeWarning,
-                      stacklevel=3)
-        return []
-    paths = []
-    f = r.fragility
-    fig, ax = plt.subplots(figsize=(6, 4))
-    m = np.array(f["median"])
-    p = np.array(f["probability"])
-    c = np.array(f["cov"])
-    if np.isfinite(f["band_low"]).all():
-        ax.fill_between(m, f["band_low"], f["band_high"], color="C0", alpha=0.2,
-                        label=f"5-95 % over {study.estimator.epistemic_draws} kinetics draws "
-                              "(kinetics only)")
-    ax.errorbar(m, p, yerr=_Z * c * p, fmt="o-", color="C0", capsize=3,
-                label="all inputs sampled, 95 % sampling interval")
-    ax.axvline(float(study.drop_height.frozen.median()), color="grey", ls=":",
-               label="study median")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xticks(m[::2], [f"{v:.3g}" for v in m[::2]])
-    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlabel("median drop height [m]")
-    ax.set_ylabel("P(reaction) per accident")
-    outside = [x.material for x in r.surfaces if x.regime == "outside"]
-    ax.set_title(f"{r.name}: fragility" + (f"\n(modelled surfaces; {', '.join(outside)} "
-                                           "outside the model, not in P)" if outside else ""),
-                 fontsize=10)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    paths.append(out / "fragility.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
-
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 4), gridspec_kw={"width_ratios": [3, 2]})
-    keys = list(r.importance)
-    values = [r.importance[k] for k in keys]
-    ax1.barh(range(len(keys)), values, color=["C3" if v > 0 else "C0" for v in values])
-    ax1.set_yticks(range(len(keys)), [k.replace("kinetics.", "kinetics: ").replace("_", " ")
-                                      for k in keys], fontsize=8)
-    ax1.axvline(0, color="black", lw=0.5)
-    ax1.set_xlabel("mean shift of the input over reactions\n"
-                   "E[U | reaction] [standard deviations from its median]", fontsize=8)
-    ax1.invert_yaxis()
-    from matplotlib.patches import Patch
-
-    ax1.legend(handles=[Patch(color="C3", label="reactions need a higher value"),
-                        Patch(color="C0", label="reactions need a lower value")],
-               fontsize=7, loc="best")
-    names = [s.material for s in r.surfaces]
-    x = np.arange(len(names))
-    ax2.bar(x - 0.2, [s.weight for s in r.surfaces], 0.4, color="C7",
-            label="share of accidents")
-    shares = [s.share / r.probability if r.probability > 0 and s.regime != "outside"
-              and s.share > 0 else np.nan for s in r.surfaces]
-    ax2.bar(x + 0.2, shares, 0.4, color="C1", label="share of P")
-    ax2.set_yscale("log")
-    floor = min([v for v in shares if np.isfinite(v)] + [0.01])
-    bottom = max(floor / 3, 1e-16)
-    ax2.set_ylim(bottom, 50.0)  # room above 1 for the legend
-    for k, s in enumerate(r.surfaces):
-        if s.regime == "outside":
-            ax2.text(k + 0.2, math.sqrt(bottom), "outside the model:\nnot in P", rotation=90,
-                     fontsize=7, ha="center", va="center", color="C1")
-    ax2.set_xticks(x, [f"{n}\n({s.regime})" for n, s in zip(names, r.surfaces)], rotation=30,
-                   fontsize=7)
-    ax2.set_xlim(-0.6, len(names) - 0.4)
-    ax2.set_ylabel("fraction (log scale)", fontsize=8)
-    ax2.legend(fontsize=7, loc="upper right", ncol=2)
-    fig.suptitle(f"{r.name}: what drives a reaction (left: inputs, pooled; right: surfaces)",
-                 fontsize=10)
-    fig.tight_layout()
-    paths.append(out / "importance.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
-    return paths

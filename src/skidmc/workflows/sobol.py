@@ -19,7 +19,6 @@ recomputes from the first N; ``--workers`` and ``--scheduler`` are those of ever
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -237,5 +236,7 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
         force = resume = False  # what this call computed is this study's own run
     record = {"threshold": design.stable_threshold, "half_width": design.stable_half_width,
               "n_max": design.n_max, "steps": steps, "stable": all(steps[-1]["stable"].values())}
-    (path.parent / "convergence.json").write_text(json.dumps(record, indent=1) + "\n")
+    from skidmc.workflows.reporting import write_json
+
+    write_json(path.parent / "convergence.json", record)
     return steps
