@@ -312,6 +312,108 @@ def test_an_unreachable_rtol_is_flagged_with_the_estimate_reached(capsys):
     assert "rtol_unmet" not in json.loads(capsys.readouterr().out)["flags"]
 
 
+def test_critical_height_flags_an_unreachable_rtol_with_the_estimate_reached():
+    from skidmc.scene import get_preset
+    from skidmc.solver import critical_height
+    from skidmc.solver.results import RTOL_UNMET
+
+    scene = get_preset("paper-quartz")
+    tight = critical_height(scene, rtol=1e-12)
+    assert tight.censored is None and RTOL_UNMET in tight.flags and tight.rtol_unmet
+    # the estimate reached is kept: the finest level's, 2.9e-5 on paper-quartz when measured;
+    # any finite value above the rtol asked and below the default 1e-3 is that estimate
+    assert 1e-12 < tight.error_estimate < 1e-3
+    assert tight.to_dict()["flags"] == list(tight.flags)
+    normal = critical_height(scene, rtol=1e-3)
+    assert not normal.rtol_unmet and RTOL_UNMET not in normal.flags
+    assert normal.error_estimate <= 1e-3
+    # the fast tier and a forced level do not aim at rtol: not flagged
+    assert not critical_height(scene, rtol=1e-12, tier="fast").rtol_unmet
+    assert not critical_height(scene, rtol=1e-12, level=0.0).rtol_unmet
+
+
+def test_evaluate_batch_stores_rtol_unmet_per_sample():
+    from skidmc.ensemble.batch import evaluate_batch
+    from skidmc.scene import get_preset
+
+    quartz = get_preset("paper-quartz")
+    tight = evaluate_batch([quartz], {"rtol": 1e-12})
+    normal = evaluate_batch([quartz], {"rtol": 1e-2})
+    assert tight.status[0] == "ok" and "rtol_unmet" in tight.flags[0].split(",")
+    assert "rtol_unmet" not in normal.flags[0].split(",")
+
+
+class _FlatEstimate:
+    """A stand-in solver (module level: it pickles) whose estimate is 0.02 whatever rtol."""
+
+    def __call__(self, scene, rtol=1e-3, **kwargs):
+        from skidmc.solver.results import HeightResult
+
+        return HeightResult(critical_height=1.0, censored=None, evaluations=3, flags=(),
+                            error_estimate=0.02)
+
+
+IMPLAUSIBLE_STUDY = """
+[study]
+name = "odd"
+[scene]
+preset = "paper-quartz"
+# T0 plausible from 150 K (scene/keys.py): about a quarter of this range lies below it
+[uncertain.initial_temperature]
+distribution = "uniform"
+loc = "100 K"
+scale = "200 K"
+source = "test"
+[design]
+method = "mc"
+n = 16
+seed = 3
+[solver]
+rtol = 1e-2
+"""
+
+
+def test_an_ensemble_flags_and_counts_samples_outside_the_plausible_range(tmp_path):
+    import numpy as np
+
+    from skidmc.analysis.report import write_report
+    from skidmc.ensemble.run import execute_study
+    from skidmc.ensemble.storage import open_ensemble
+    from skidmc.workflows.ensemble import scene_summary_lines
+
+    (tmp_path / "odd.toml").write_text(IMPLAUSIBLE_STUDY)
+    report = execute_study(tmp_path / "odd.toml", tmp_path / "o.h5", workers=1, progress=False)
+    ds = open_ensemble(report.path)
+    below = ds["initial_temperature"].values < 150.0  # the key's plausible lower end [K]
+    flagged = np.array(["implausible_input" in f.split(",") for f in ds["flags"].values])
+    assert 0 < below.sum() < below.size  # the draw reaches both sides (seed 3)
+    assert (flagged == below).all()
+    assert (ds["status"].values == "ok").all()  # taken at its word: flagged, not refused
+    lines = "\n".join(scene_summary_lines(report.path))
+    assert f"implausible_input {int(below.sum())}" in lines
+    write_report(ds, tmp_path / "report", source="odd.toml")
+    summary = (tmp_path / "report" / "summary.md").read_text()
+    assert f"implausible_input {int(below.sum())}" in summary
+
+
+def test_an_ensemble_counts_rtol_unmet_in_its_output(tmp_path, capsys):
+    import unittest.mock
+
+    from skidmc.cli import main
+    from skidmc.ensemble import run as run_module
+
+    (tmp_path / "s.toml").write_text(SMALL.format(n=4))
+    real = run_module.execute_study
+
+    def with_flat_solver(*args, **kwargs):
+        return real(*args, **{**kwargs, "solver": _FlatEstimate()})
+
+    with unittest.mock.patch.object(run_module, "execute_study", with_flat_solver):
+        assert main(["run", str(tmp_path / "s.toml"), "--out", str(tmp_path / "o.h5"),
+                     "--workers", "1"]) == 0
+    assert "rtol_unmet 4" in capsys.readouterr().err  # the study's rtol 1e-3 < 0.02
+
+
 @pytest.mark.parametrize(("key", "value"), [("flow_stress", "1e15 psi"),
                                             ("billet_diameter", "1 km"),
                                             ("he.density", "1000 g/cm^3"),

@@ -222,8 +222,10 @@ def _cmd_height(args: argparse.Namespace) -> int:
     error = report.get("error_estimate")
     if args.tier == "full" and isinstance(error, (int, float)) and math.isfinite(error) \
             and error > args.rtol * (1 + 1e-9):
-        # the search refined as far as it goes (its finest level) and stopped above rtol
-        report["flags"].append(RTOL_UNMET)
+        # the search refined as far as it goes (its finest level) and stopped above rtol (the
+        # solver flags it itself; a stand-in solver may not)
+        if RTOL_UNMET not in report["flags"]:
+            report["flags"].append(RTOL_UNMET)
         report["rtol_unmet"] = {"requested": args.rtol, "achieved_estimate": float(error)}
         print(f"skidmc height: warning: --rtol {args.rtol:g} was not reached: the finest "
               f"refinement gave an error estimate of {error:.2g}; ask for --rtol {error:.1g} or "
@@ -268,8 +270,9 @@ def _height_text(report: dict, censored: str | None, args: argparse.Namespace,
         rows += [("evaluations", str(report["evaluations"])),
                  ("wall time", f"{report['wall_time_s']:.3g} s")]
     flags = report["flags"]
-    meanings = {**FLAG_MEANINGS, RTOL_UNMET: "the requested rtol was not reached (the search "
-                "refined as far as it goes); the error estimate above is what was reached"}
+    from skidmc.solver.results import RESULT_FLAG_MEANINGS
+
+    meanings = {**FLAG_MEANINGS, **RESULT_FLAG_MEANINGS}
     rows += [("flags" if i == 0 else "", f"{flag}: {meanings.get(flag, '(undocumented)')}")
              for i, flag in enumerate(flags)] or [("flags", "none")]
     rows += [("implausible" if i == 0 else "", line)

@@ -91,8 +91,11 @@ def scene_outcomes(ds: xr.Dataset, scene: str) -> dict:
         ``heights_m`` [m] (finished, not failed samples, flattened over the sample dims, bounds
         for censored samples; of a ``saltelli`` design only the base rows), ``censored`` ("",
         "above", "below"), and the counts ``n``, ``n_failed``, ``n_unfinished``, ``n_above``,
-        ``n_below``.
+        ``n_below``; ``flags``: flag -> written samples of the scene carrying it (all rows of
+        the design; the solver's validity flags, ``rtol_unmet``, ``implausible_input``).
     """
+    from skidmc.ensemble.storage import flag_counts
+
     sub = _select(ds, scene)
     height = np.asarray(sub["critical_height"].values, dtype=float).reshape(-1)
     status = np.asarray(sub["status"].values).astype(str).reshape(-1)
@@ -114,6 +117,7 @@ def scene_outcomes(ds: xr.Dataset, scene: str) -> dict:
         "n_unfinished": int(unfinished.sum()),
         "n_above": int((censored == "above").sum()),
         "n_below": int((censored == "below").sum()),
+        "flags": flag_counts(sub["flags"].values) if "flags" in sub else {},
     }
 
 
@@ -666,6 +670,13 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str,
             f"{_triple(iv['h50'])} | {_triple(iv['sigma'])} | {_triple(iv['h01'])} | "
             f"{_triple(iv['h10'])} | {_triple(iv['h90'])} | {a.fit.verdict} "
             f"(PPCC p = {_fmt(a.fit.p_value, 2)}) |")
+    flagged = [a for a in analyses if a.counts.get("flags")]
+    if flagged:  # issue 44: never silently unmet rtol or implausible inputs
+        lines += ["", "Flagged samples (written samples carrying each flag; `rtol_unmet`: the "
+                  "requested rtol was not reached, `implausible_input`: an input outside its "
+                  "plausible range): " + "; ".join(
+                      f"{a.scene}: " + ", ".join(f"{k} {v}" for k, v in a.counts["flags"].items())
+                      for a in flagged)]
     nested = [a for a in analyses if a.epistemic is not None]
     if nested:
         lines += ["", "## Epistemic spread", "",

@@ -186,4 +186,10 @@ def scene_summary_lines(path) -> list[str]:
             f"5-95 %: {_heights([s.p05, s.p95], s.range_bound)}; "
             f"censored {s.censored_above} above, {s.censored_below} below; "
             f"failed {s.failed} of {s.written}{todo}")
+    flagged = [(s.scene, s.flags) for s in summaries if s.flags]
+    if flagged:
+        lines.append("flagged samples per scene (skidmc.solver.FLAG_MEANINGS, "
+                     "skidmc.solver.results.RESULT_FLAG_MEANINGS):")
+        lines += [f"  {scene:<{width}}  " + ", ".join(f"{flag} {n}" for flag, n in flags.items())
+                  for scene, flags in flagged]
     return lines
