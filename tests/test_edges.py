@@ -19,6 +19,7 @@ import math
 import os
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -489,20 +490,70 @@ def test_report_and_open_ensemble_on_a_bad_file_do_not_talk_of_overwriting(
 
 
 def test_a_second_run_on_the_same_output_is_refused_while_the_first_holds_it(tmp_path):
-    from skidmc.ensemble.run import _lock_folder
-    from skidmc.ensemble.storage import StorageError
+    from skidmc.ensemble.run import lock_output
 
     (tmp_path / "s.toml").write_text(SMALL.format(n=8))
-    held = _lock_folder(tmp_path / "o.h5")  # as a run in progress holds it
+    (tmp_path / "sub").mkdir()
+    held = lock_output(tmp_path / "o.h5")  # as a run in progress holds it
     try:
         proc = skidmc("run", "s.toml", "--out", "o.h5", "--force", "--workers", "1",
                       cwd=tmp_path)
         refused(proc, "another skidmc run holds this output")
-        with pytest.raises(StorageError, match="another skidmc run"):
-            _lock_folder(tmp_path / "o.h5")
+        # the same file named otherwise (through another folder, or as a folder's default)
+        proc = skidmc("run", "s.toml", "--out", "sub/../o.h5", "--workers", "1", cwd=tmp_path)
+        refused(proc, "another skidmc run holds this output")
     finally:
-        os.close(held)
-    assert leftovers(tmp_path) == []
+        held.release()
+    (tmp_path / "sub").rmdir()
+    assert leftovers(tmp_path) == []  # the lock file goes with its run
+
+
+def test_runs_on_other_files_of_one_folder_do_not_block_each_other(tmp_path):
+    from skidmc.ensemble.run import execute_study, lock_output
+    from skidmc.ensemble.storage import StorageError
+
+    (tmp_path / "s.toml").write_text(SMALL.format(n=4))
+    with lock_output(tmp_path / "a.h5"):  # a run writing a.h5 in this folder
+        report = execute_study(tmp_path / "s.toml", tmp_path / "b.h5", workers=1,
+                               progress=False, solver=_FlatEstimate())
+        assert report.status_counts == {"ok": 4}
+        with pytest.raises(StorageError, match="another skidmc run"):
+            subprocess_lock(tmp_path / "a.h5")
+        # a nested hold of the same file by this thread (a Sobol' growth's steps) is counted
+        with lock_output(tmp_path / "a.h5"):
+            pass
+        with pytest.raises(StorageError, match="another skidmc run"):  # still held
+            subprocess_lock(tmp_path / "a.h5")
+        errors = []  # another thread of this process is refused like another process
+        thread = threading.Thread(target=lambda: _try_lock(tmp_path / "a.h5", errors))
+        thread.start()
+        thread.join()
+        assert len(errors) == 1 and isinstance(errors[0], StorageError)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.h5", "s.toml"]
+
+
+def _try_lock(path: Path, errors: list) -> None:
+    from skidmc.ensemble.run import lock_output
+
+    try:
+        lock_output(path).release()
+    except Exception as exc:  # noqa: BLE001 - handed to the test's thread
+        errors.append(exc)
+
+
+def subprocess_lock(path: Path) -> None:
+    """Try to hold `path` from another process; raise its StorageError here."""
+    from skidmc.ensemble.storage import StorageError
+
+    code = ("import sys\nfrom pathlib import Path\nfrom skidmc.ensemble.run import lock_output\n"
+            "try:\n    lock_output(Path(sys.argv[1]))\nexcept Exception as exc:\n"
+            "    print(exc); sys.exit(3)\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    proc = subprocess.run([sys.executable, "-c", code, str(path)], env=env,
+                          capture_output=True, text=True, timeout=BOUND)
+    if proc.returncode == 3:
+        raise StorageError(path, proc.stdout.strip())
+    assert proc.returncode == 0, proc.stderr
 
 
 # --- 6. orphans ---------------------------------------------------------------------------------

@@ -87,9 +87,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DRAW_BLOCK",
+    "OutputLock",
     "RunInterrupted",
     "RunReport",
     "execute_study",
+    "lock_output",
     "run_study",
 ]
 
@@ -528,7 +530,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                 executor.shutdown()
             executor, owned = None, False
         path = _resolve_out(study, out)
-        lock = _lock_folder(path)
+        lock = lock_output(path)
         command = command or f"run_study({study.file!r}, n={study.design.n})"
         report = RunReport(path=path, n_rows=study.n_rows, n_scenes=len(study.scenes),
                            timeline=[] if timeline else None)
@@ -603,15 +605,58 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
         if executor is not None and owned:
             executor.shutdown()
         if lock is not None:
-            os.close(lock)  # releases the lock
+            lock.release()
     return report
 
 
-def _lock_folder(path: Path) -> int | None:
-    """Hold the result file's folder for this run (an exclusive ``flock`` on the folder,
-    released when the run ends, also by a kill): a second run into the same folder is refused
-    at once with a clear message instead of an HDF5 lock error or a missing ``.new.tmp``.
-    None where the folder cannot be made or locked (the file's creation then says why)."""
+class OutputLock:
+    """This process's hold on one result file (see :func:`lock_output`); :meth:`release` ends
+    it (also a kill does: the kernel drops an ``flock`` with its process)."""
+
+    def __init__(self, key, fd: int, lock_path: Path) -> None:
+        self._key, self._fd, self.lock_path = key, fd, lock_path
+
+    def release(self) -> None:
+        """Let go of the file (once; a nested hold of the same file by this process lets go
+        when the outermost one does)."""
+        if self._fd is None:
+            return
+        held = _HELD.get(self._key)
+        if held is not None:
+            held[1] -= 1
+            if held[1] > 0:  # an outer hold of this process still runs
+                self._fd = None
+                return
+            del _HELD[self._key]
+            try:
+                self.lock_path.unlink()  # still ours: we hold its lock
+            except OSError:
+                pass
+            os.close(held[0])
+        self._fd = None
+
+    def __enter__(self) -> OutputLock:  # noqa: PYI034 - not subclassed
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+#: The result files this process holds: (device, inode of the lock file, thread) -> [fd, holds].
+_HELD: dict = {}
+
+
+def lock_output(path: Path) -> OutputLock | None:
+    """Hold the result file `path` for this run: an exclusive ``flock`` on ``.<name>.lock``
+    beside it, made for the run and removed when it ends (a run killed with -9 leaves it, an
+    empty file that the next run takes over). A second run on the same file (whatever path
+    names it: the lock is on the file's inode) is refused at once with a clear message instead
+    of an HDF5 lock error or a missing ``.new.tmp``; runs on other files of the same folder go
+    on side by side. The file's work files (``.new``, ``.compact``) share its hold. Nested
+    holds of one file by one thread (a growing Sobol' study's steps) are counted, not refused;
+    another thread of the same process is refused like another process.
+    None where no lock can be made (the file's creation then says why).
+    """
     import errno
 
     from skidmc.ensemble.storage import StorageError
@@ -622,21 +667,40 @@ def _lock_folder(path: Path) -> int | None:
         return None
 
     folder = path.absolute().parent
+    lock_path = folder / f".{path.name}.lock"
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        fd = os.open(folder, os.O_RDONLY)
     except OSError:
         return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError as exc:
-        os.close(fd)
-        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-            raise StorageError(path, f"another skidmc run holds this output (its folder "
-                               f"{folder} is locked by a run in progress); wait for it to end "
-                               "or choose another --out") from None
-        return None
-    return fd
+    for _ in range(10):  # retried only when another run removed the file between open and lock
+        try:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:
+            return None
+        st = os.fstat(fd)
+        key = (st.st_dev, st.st_ino, threading.get_ident())
+        if key in _HELD:  # this thread holds it already (a nested run)
+            os.close(fd)
+            _HELD[key][1] += 1
+            return OutputLock(key, _HELD[key][0], lock_path)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise StorageError(path, "another skidmc run holds this output (a run in "
+                                   f"progress writes it: {lock_path.name} is locked); wait for "
+                                   "it to end or choose another --out") from None
+            return None
+        try:
+            same = os.stat(lock_path).st_ino == st.st_ino
+        except OSError:
+            same = False
+        if same:
+            _HELD[key] = [fd, 1]
+            return OutputLock(key, fd, lock_path)
+        os.close(fd)  # the holder removed it as we opened it: take the new one
+    return None
 
 
 class _Draws:
