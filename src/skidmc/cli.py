@@ -307,8 +307,9 @@ def _add_run_parser(subparsers) -> None:
                      "where it is not samples per scene")
     run.add_argument("--yes", action="store_true",
                      help="run a large study (over 2 GB on disk or about 6 h) without asking; "
-                     "without a terminal a large run is refused unless --yes is given (plain "
-                     "ensemble studies; the other kinds refuse --yes)")
+                     "without a terminal a large run is refused unless --yes is given "
+                     "(ensemble and growing Sobol' studies, whose size is that up to n_max; "
+                     "the hazard kind refuses --yes)")
     run.add_argument("--workers", type=_positive_int,
                      help="parallel workers, >= 1 (default: all CPUs)")
     run.add_argument("--scheduler", metavar="{local,dask,tcp://host:port}",

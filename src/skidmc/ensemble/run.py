@@ -90,8 +90,12 @@ __all__ = [
     "OutputLock",
     "RunInterrupted",
     "RunReport",
+    "RunSize",
+    "check_size",
     "execute_study",
     "lock_output",
+    "measured_rate",
+    "run_size",
     "run_study",
 ]
 
@@ -323,9 +327,23 @@ class RunInterrupted(KeyboardInterrupt):
 
 #: Scene evaluations per second of one worker at the default rtol, as measured by
 #: ``benchmarks/throughput.py`` (results/benchmarks/throughput.md: 350-380/s in process at
-#: rtol 1e-2 on the 2-CPU development machine); only for the estimated time printed before a
-#: run and asked about (:func:`run_size`), never for a result.
+#: rtol 1e-2 on the 2-CPU development machine): the rate assumed where none is measured (a
+#: small run, the GPU backend, a run that cannot fit the disk); only for the estimated time
+#: printed before a run and asked about (:func:`run_size`), never for a result.
 EVALUATIONS_PER_SECOND_PER_WORKER = 300.0
+
+#: A run whose time at :data:`EVALUATIONS_PER_SECOND_PER_WORKER` is this long or more [s] has
+#: its rate measured on its own first heights (:func:`measured_rate`) before it starts: the
+#: rate differs by two decades between studies (rtol 1e-2 against 1e-4, scenes whose margin
+#: jumps, layered targets), so neither a fixed rate nor one a different study recorded says
+#: how long this one takes. Below, the run is over in seconds and the measurement (one
+#: warm-up height, the kernels loaded in this process) would be a large part of it.
+MEASURE_FROM_SECONDS = 2.0
+
+#: The measurement: at most this many timed heights, after one untimed warm-up (which loads
+#: the compiled kernels), and no more timed heights once this many seconds are spent.
+MEASURE_HEIGHTS = 4
+MEASURE_SECONDS = 3.0
 
 #: A run above this many bytes on disk or this many seconds (estimated) needs a confirmation
 #: (``skidmc run --yes``, or an answer at a terminal).
@@ -355,7 +373,7 @@ def failure_counts(reasons) -> str:
     from collections import Counter
 
     counts = Counter(str(r) for r in reasons).most_common()
-    shown = "; ".join(f"{n} x {reason[:160]}" for reason, n in counts[:3])
+    shown = "; ".join(f"{n} x {reason[:256]}" for reason, n in counts[:3])
     if len(counts) > 3:
         shown += f"; and {len(counts) - 3} other reasons"
     return shown
@@ -372,10 +390,17 @@ class RunSize:
     bytes : int
         Size of the result file [bytes] (allocated in full when it is created).
     seconds : float
-        Estimated wall time [s] at :data:`EVALUATIONS_PER_SECOND_PER_WORKER` per worker.
+        Estimated wall time [s]: the evaluations at `rate` per worker.
     free_bytes : int
         Free space of the disk that holds the result file [bytes].
     workers : int
+    rate : float
+        Evaluations per second of one worker [1/s] the estimate uses.
+    basis : str
+        Where `rate` comes from: ``"measured: 4 heights of this study in 0.12 s"`` or
+        ``"assumed ..."`` (:data:`EVALUATIONS_PER_SECOND_PER_WORKER`); printed with the estimate.
+    what : str
+        What the size is of, when not simply the run (a growing Sobol' study: up to n_max).
     """
 
     n_rows: int
@@ -384,6 +409,9 @@ class RunSize:
     seconds: float
     free_bytes: int
     workers: int
+    rate: float = EVALUATIONS_PER_SECOND_PER_WORKER
+    basis: str = ""
+    what: str = ""
 
     @property
     def evaluations(self) -> int:
@@ -394,9 +422,10 @@ class RunSize:
         return self.bytes > LARGE_RUN_BYTES or self.seconds > LARGE_RUN_SECONDS
 
     def describe(self) -> str:
-        return (f"{self.n_rows:,} samples x {self.n_scenes} scenes = {self.evaluations:,} "
-                f"evaluations, a result file of {_bytes(self.bytes)}, about "
-                f"{_duration(self.seconds)} on {self.workers} workers")
+        basis = f" ({self.rate:.3g} heights/s per worker, {self.basis})" if self.basis else ""
+        return (f"{self.what}{self.n_rows:,} samples x {self.n_scenes} scenes = "
+                f"{self.evaluations:,} evaluations, a result file of {_bytes(self.bytes)}, about "
+                f"{_duration(self.seconds)} on {self.workers} workers{basis}")
 
 
 def _bytes(n: float) -> str:
@@ -414,9 +443,15 @@ def _duration(seconds: float) -> str:
     return f"{seconds:.2g} s"
 
 
-def run_size(study: Study, path: Path, workers: int | None = None) -> RunSize:
+def run_size(study: Study, path: Path, workers: int | None = None, *,
+             solver: Callable | None = None, measure: bool = True,
+             evaluations: int | None = None) -> RunSize:
     """The size of a run of `study` into `path` (see :class:`RunSize`), from the file's
-    layout (:func:`skidmc.ensemble.storage.estimated_bytes`) and the recorded rate."""
+    layout (:func:`skidmc.ensemble.storage.estimated_bytes`) and a rate per worker: measured
+    on the study's own first heights (:func:`measured_rate`, with `solver`) where the run
+    is long enough for it to matter (:data:`MEASURE_FROM_SECONDS`) and fits the disk,
+    else :data:`EVALUATIONS_PER_SECOND_PER_WORKER`. `evaluations`: those still to compute,
+    when not all of the study's (a run that continues one)."""
     import shutil
 
     from skidmc.ensemble.storage import estimated_bytes
@@ -431,8 +466,61 @@ def run_size(study: Study, path: Path, workers: int | None = None) -> RunSize:
         free = shutil.disk_usage(where).free
     except OSError:
         free = -1
-    seconds = study.n_rows * len(study.scenes) / (EVALUATIONS_PER_SECOND_PER_WORKER * slots)
-    return RunSize(study.n_rows, len(study.scenes), estimated_bytes(study), seconds, free, slots)
+    size_bytes = estimated_bytes(study)
+    todo = study.n_rows * len(study.scenes) if evaluations is None else evaluations
+    rate = EVALUATIONS_PER_SECOND_PER_WORKER
+    basis = (f"assumed: the rate of benchmarks/throughput.py at rtol 1e-2, "
+             f"{EVALUATIONS_PER_SECOND_PER_WORKER:g}/s; not measured")
+    fits = free < 0 or size_bytes + DISK_MARGIN_BYTES <= free
+    if measure and fits and study.solver.backend == "cpu" \
+            and todo / (rate * slots) >= MEASURE_FROM_SECONDS:
+        measured = measured_rate(study, solver)
+        if measured is not None:
+            rate, count, seconds = measured
+            basis = (f"measured: {count} heights of this study in {seconds:.2g} s in this "
+                     "process")
+    return RunSize(study.n_rows, len(study.scenes), size_bytes, todo / (rate * slots), free,
+                   slots, rate, basis)
+
+
+def measured_rate(study: Study, solver: Callable | None = None,
+                  heights: int = MEASURE_HEIGHTS,
+                  budget: float = MEASURE_SECONDS) -> tuple[float, int, float] | None:
+    """Heights per second [1/s] of one worker on this study, timed in this process: first one
+    untimed warm-up height per scene (its first sample: the compiled kernels a scene needs
+    load, or compile, on its first height; a layered target needs others than a homogeneous
+    one), then its next samples, scene after scene as a run evaluates them; at most `heights`
+    timed, and no more once `budget` seconds [s] are spent. Returns (rate, heights timed,
+    seconds) or None when nothing could be timed (a study of one row per scene). The heights
+    are computed again by the run (a few seconds at most)."""
+    from skidmc.ensemble.evaluate import evaluate_here
+    from skidmc.ensemble.sampling import StudySampler
+
+    n_scenes = len(study.scenes)
+    rows = min(study.n_rows, 1 + -(-heights // n_scenes))
+    if rows < 2:
+        return None
+    drawn = StudySampler(study).draw(0, rows)
+    options = solver_kwargs(study.solver)
+    options.pop("backend", None)
+
+    def solve(j: int, i: int) -> float:
+        columns = {key: v[i:i + 1] for key, v in drawn[j].items() if key in SI_UNITS}
+        t0 = time.perf_counter()
+        evaluate_here(columns, options, study.scenes[j].scene, solver)
+        return time.perf_counter() - t0
+
+    for j in range(n_scenes):
+        solve(j, 0)  # the warm-ups
+    timed, spent = 0, 0.0
+    for i, j in [(i, j) for i in range(1, rows) for j in range(n_scenes)][:heights]:
+        spent += solve(j, i)
+        timed += 1
+        if spent >= budget:
+            break
+    if timed == 0 or spent <= 0.0:
+        return None
+    return timed / spent, timed, spent
 
 
 def check_size(size: RunSize, path: Path, confirm: Callable[[RunSize], bool] | None) -> None:
@@ -549,7 +637,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
         work = path.with_name(path.name + ".new")  # --force: the new file until complete
         created = action == "new" or (action == "replace" and not work.exists())
         if created:
-            check_size(run_size(study, path, workers), path, confirm)
+            check_size(run_size(study, path, workers, solver=solver), path, confirm)
         file = _open_result_file(study, path, action, work)
         todo = ~file.done()
         try:

@@ -154,8 +154,9 @@ class SceneUnsolvable(SolverError, SkidmcError):
 
         odd = implausible_inputs(scene) if isinstance(scene, Scene) else ()
         why = f"{type(exc).__name__}: {exc}"
-        hint = ("; inputs outside their plausible range: " + "; ".join(odd)) if odd else ""
-        super().__init__(f"the solver could not finish this scene ({why}){hint}")
+        # the likely cause first: a run's reasons are kept to 256 characters
+        hint = " (likely cause: " + "; ".join(odd) + ")" if odd else ""
+        super().__init__(f"the solver could not finish this scene{hint}: {why}")
         self.cause, self.implausible = why, odd
 
 
