@@ -482,7 +482,7 @@ def test_an_ensemble_flags_and_counts_samples_outside_the_plausible_range(tmp_pa
     from skidmc.analysis.report import write_report
     from skidmc.ensemble.run import execute_study
     from skidmc.ensemble.storage import open_ensemble
-    from skidmc.workflows.ensemble import scene_summary_lines
+    from skidmc.workflows.ensemble import flag_summary_lines
 
     (tmp_path / "odd.toml").write_text(IMPLAUSIBLE_STUDY)
     report = execute_study(tmp_path / "odd.toml", tmp_path / "o.h5", workers=1, progress=False)
@@ -492,7 +492,7 @@ def test_an_ensemble_flags_and_counts_samples_outside_the_plausible_range(tmp_pa
     assert 0 < below.sum() < below.size  # the draw reaches both sides (seed 3)
     assert (flagged == below).all()
     assert (ds["status"].values == "ok").all()  # taken at its word: flagged, not refused
-    lines = "\n".join(scene_summary_lines(report.path))
+    lines = "\n".join(flag_summary_lines(report.path))
     assert f"implausible_input {int(below.sum())}" in lines
     write_report(ds, tmp_path / "report", source="odd.toml")
     summary = (tmp_path / "report" / "summary.md").read_text()

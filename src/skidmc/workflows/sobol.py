@@ -24,7 +24,7 @@ import os
 from collections.abc import Callable
 from pathlib import Path
 
-from skidmc.workflows.ensemble import ensemble_report, scene_summary_lines
+from skidmc.workflows.ensemble import ensemble_report, flag_summary_lines, scene_summary_lines
 from skidmc.workflows.registry import Outcome, ReportOptions, RunOptions
 
 __all__ = ["DESCRIPTION", "REPORT_OPTIONS", "RUN_OPTIONS", "GrowthStep", "default_out", "detect",
@@ -85,7 +85,7 @@ def run(study, options: RunOptions) -> Outcome:
     if not options.quiet:
         lines.append(f"skidmc run: N = {steps[-1]['n']}: Sobol' indices "
                      f"{'stable' if stable else 'NOT stable (n_max reached)'}")
-        lines += scene_summary_lines(path)
+        lines += scene_summary_lines(path) + flag_summary_lines(path)
     return Outcome(0, path, tuple(lines))
 
 
