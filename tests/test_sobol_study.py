@@ -103,3 +103,32 @@ def test_n_max_below_n_is_refused():
     with pytest.raises(StudyError, match="must be >= design.n") as info:
         parse_study(GROWING.replace("n_max = 8192", "n_max = 4"))
     assert info.value.key == "design.n_max"
+
+
+def test_a_large_growth_is_sized_up_to_n_max_and_needs_confirming(tmp_path, capsys):
+    # n_max = 2^20: 5.2 million rows of 5 per base sample, about 4.8 GB for the last step's
+    # grown file beside the result it grows from: large (over 2 GB), so asked about first
+    from skidmc.cli import main
+    from skidmc.ensemble.run import RunTooLarge
+
+    big = GROWING.replace("n_max = 8192", "n_max = 1048576")
+    seen = []
+
+    def decline(size) -> bool:
+        seen.append(size)
+        return False
+
+    with pytest.raises(RunTooLarge, match="not confirmed: growing N from 8 up to 1048576"):
+        run_until_stable(parse_study(big), tmp_path / "g.h5", workers=1, solver=fake_height,
+                         confirm=decline, log=lambda line: None)
+    (size,) = seen
+    assert size.large and size.n_rows == 5 * 1048576 and size.bytes > 2e9
+    assert size.basis  # the estimated time says where its rate comes from
+    assert list(tmp_path.iterdir()) == []  # refused before anything was made
+    # the command line: refused without a terminal, naming --yes and the size
+    (tmp_path / "g.toml").write_text(big)
+    status = main(["run", str(tmp_path / "g.toml"), "--out", str(tmp_path / "g.h5"),
+                   "--workers", "1"], solver=fake_height)
+    err = capsys.readouterr().err
+    assert status == 2 and "--yes" in err and "GB" in err and "up to 1048576" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["g.toml"]

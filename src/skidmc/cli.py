@@ -221,8 +221,10 @@ def _cmd_height(args: argparse.Namespace) -> int:
     error = report.get("error_estimate")
     if args.tier == "full" and isinstance(error, (int, float)) and math.isfinite(error) \
             and error > args.rtol * (1 + 1e-9):
-        # the search refined as far as it goes (its finest level) and stopped above rtol
-        report["flags"].append(RTOL_UNMET)
+        # the search refined as far as it goes (its finest level) and stopped above rtol (the
+        # solver flags it itself; a stand-in solver may not)
+        if RTOL_UNMET not in report["flags"]:
+            report["flags"].append(RTOL_UNMET)
         report["rtol_unmet"] = {"requested": args.rtol, "achieved_estimate": float(error)}
         print(f"skidmc height: warning: --rtol {args.rtol:g} was not reached: the finest "
               f"refinement gave an error estimate of {error:.2g}; ask for --rtol {error:.1g} or "
@@ -267,8 +269,9 @@ def _height_text(report: dict, censored: str | None, args: argparse.Namespace,
         rows += [("evaluations", str(report["evaluations"])),
                  ("wall time", f"{report['wall_time_s']:.3g} s")]
     flags = report["flags"]
-    meanings = {**FLAG_MEANINGS, RTOL_UNMET: "the requested rtol was not reached (the search "
-                "refined as far as it goes); the error estimate above is what was reached"}
+    from skidmc.solver.results import RESULT_FLAG_MEANINGS
+
+    meanings = {**FLAG_MEANINGS, **RESULT_FLAG_MEANINGS}
     rows += [("flags" if i == 0 else "", f"{flag}: {meanings.get(flag, '(undocumented)')}")
              for i, flag in enumerate(flags)] or [("flags", "none")]
     rows += [("implausible" if i == 0 else "", line)
@@ -303,8 +306,9 @@ def _add_run_parser(subparsers) -> None:
                      "where it is not samples per scene")
     run.add_argument("--yes", action="store_true",
                      help="run a large study (over 2 GB on disk or about 6 h) without asking; "
-                     "without a terminal a large run is refused unless --yes is given (plain "
-                     "ensemble studies; the other kinds refuse --yes)")
+                     "without a terminal a large run is refused unless --yes is given "
+                     "(ensemble and growing Sobol' studies, whose size is that up to n_max; "
+                     "the hazard kind refuses --yes)")
     run.add_argument("--workers", type=_positive_int,
                      help="parallel workers, >= 1 (default: all CPUs)")
     run.add_argument("--scheduler", metavar="{local,dask,tcp://host:port}",

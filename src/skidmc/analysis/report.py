@@ -86,8 +86,11 @@ def scene_outcomes(ds: xr.Dataset, scene: str) -> dict:
         ``heights_m`` [m] (finished, not failed samples, flattened over the sample dims, bounds
         for censored samples; of a ``saltelli`` design only the base rows), ``censored`` ("",
         "above", "below"), and the counts ``n``, ``n_failed``, ``n_unfinished``, ``n_above``,
-        ``n_below``.
+        ``n_below``; ``flags``: flag -> written samples of the scene carrying it (all rows of
+        the design; the solver's validity flags, ``rtol_unmet``, ``implausible_input``).
     """
+    from skidmc.ensemble.storage import flag_counts
+
     sub = _select(ds, scene)
     height = np.asarray(sub["critical_height"].values, dtype=float).reshape(-1)
     status = np.asarray(sub["status"].values).astype(str).reshape(-1)
@@ -109,6 +112,7 @@ def scene_outcomes(ds: xr.Dataset, scene: str) -> dict:
         "n_unfinished": int(unfinished.sum()),
         "n_above": int((censored == "above").sum()),
         "n_below": int((censored == "below").sum()),
+        "flags": flag_counts(sub["flags"].values) if "flags" in sub else {},
     }
 
 

@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from skidmc.scene import NUMERIC_KEYS, Scene, SceneColumns, make_scene
+from skidmc.scene.scenes import implausible_inputs
 
 __all__ = [
     "BatchResult",
@@ -82,12 +83,24 @@ _STATUS_OF_CENSORING = {None: "ok", "above": "censored_above", "below": "censore
 
 
 def _solve(critical_height, scene: Scene, kwargs: dict) -> tuple[float, str, int, str, str]:
-    """(height [m], status, evaluations, flags, failure reason) of one scene; never raises."""
+    """(height [m], status, evaluations, flags, failure reason) of one scene; never raises.
+
+    The flags are the solver's, with :data:`~skidmc.solver.results.RTOL_UNMET` where the
+    result's error estimate stayed above the requested rtol (whatever the solver: a stand-in or
+    the GPU backend too) and :data:`~skidmc.solver.results.IMPLAUSIBLE_INPUT` where an input
+    lies outside its plausible range (also on a failed sample: the likely cause)."""
+    from skidmc.solver.results import IMPLAUSIBLE_INPUT, flag_unmet_rtol
+
+    odd = (IMPLAUSIBLE_INPUT,) if implausible_inputs(scene) else ()
     try:
         res = critical_height(scene, **kwargs)
     except Exception as exc:  # noqa: BLE001 - recorded, see the module docstring
-        return math.nan, "failed", 0, "", f"{type(exc).__name__}: {exc}"
-    h, flags, evaluations = float(res.critical_height), ",".join(res.flags), int(res.evaluations)
+        return math.nan, "failed", 0, ",".join(odd), f"{type(exc).__name__}: {exc}"
+    if kwargs.get("tier", "full") == "full" and kwargs.get("level") is None \
+            and kwargs.get("model") is None:
+        res = flag_unmet_rtol(res, kwargs.get("rtol", 1e-3))
+    h, evaluations = float(res.critical_height), int(res.evaluations)
+    flags = ",".join((*res.flags, *odd))
     status = _STATUS_OF_CENSORING.get(res.censored)
     if status is None:
         return math.nan, "failed", evaluations, flags, f"unknown censoring {res.censored!r}"
@@ -236,7 +249,7 @@ def _solve_pending(out: BatchResult, pending: list, critical_height, kwargs: dic
     for (i, scene), res in zip(pending, results):
         (out.critical_height[i], out.status[i], out.evaluations[i], out.flags[i],
          out.failure_reason[i]) = _solve(lambda _scene, _res=res, **_kw: _raise_or(_res),
-                                         scene, {})
+                                         scene, kwargs)
         out.wall_time[i] = share
 
 

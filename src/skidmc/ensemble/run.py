@@ -87,9 +87,15 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DRAW_BLOCK",
+    "OutputLock",
     "RunInterrupted",
     "RunReport",
+    "RunSize",
+    "check_size",
     "execute_study",
+    "lock_output",
+    "measured_rate",
+    "run_size",
     "run_study",
 ]
 
@@ -321,9 +327,23 @@ class RunInterrupted(KeyboardInterrupt):
 
 #: Scene evaluations per second of one worker at the default rtol, as measured by
 #: ``benchmarks/throughput.py`` (results/benchmarks/throughput.md: 350-380/s in process at
-#: rtol 1e-2 on the 2-CPU development machine); only for the estimated time printed before a
-#: run and asked about (:func:`run_size`), never for a result.
+#: rtol 1e-2 on the 2-CPU development machine): the rate assumed where none is measured (a
+#: small run, the GPU backend, a run that cannot fit the disk); only for the estimated time
+#: printed before a run and asked about (:func:`run_size`), never for a result.
 EVALUATIONS_PER_SECOND_PER_WORKER = 300.0
+
+#: A run whose time at :data:`EVALUATIONS_PER_SECOND_PER_WORKER` is this long or more [s] has
+#: its rate measured on its own first heights (:func:`measured_rate`) before it starts: the
+#: rate differs by two decades between studies (rtol 1e-2 against 1e-4, scenes whose margin
+#: jumps, layered targets), so neither a fixed rate nor one a different study recorded says
+#: how long this one takes. Below, the run is over in seconds and the measurement (one
+#: warm-up height, the kernels loaded in this process) would be a large part of it.
+MEASURE_FROM_SECONDS = 2.0
+
+#: The measurement: at most this many timed heights, after one untimed warm-up (which loads
+#: the compiled kernels), and no more timed heights once this many seconds are spent.
+MEASURE_HEIGHTS = 4
+MEASURE_SECONDS = 3.0
 
 #: A run above this many bytes on disk or this many seconds (estimated) needs a confirmation
 #: (``skidmc run --yes``, or an answer at a terminal).
@@ -353,7 +373,7 @@ def failure_counts(reasons) -> str:
     from collections import Counter
 
     counts = Counter(str(r) for r in reasons).most_common()
-    shown = "; ".join(f"{n} x {reason[:160]}" for reason, n in counts[:3])
+    shown = "; ".join(f"{n} x {reason[:256]}" for reason, n in counts[:3])
     if len(counts) > 3:
         shown += f"; and {len(counts) - 3} other reasons"
     return shown
@@ -370,10 +390,17 @@ class RunSize:
     bytes : int
         Size of the result file [bytes] (allocated in full when it is created).
     seconds : float
-        Estimated wall time [s] at :data:`EVALUATIONS_PER_SECOND_PER_WORKER` per worker.
+        Estimated wall time [s]: the evaluations at `rate` per worker.
     free_bytes : int
         Free space of the disk that holds the result file [bytes].
     workers : int
+    rate : float
+        Evaluations per second of one worker [1/s] the estimate uses.
+    basis : str
+        Where `rate` comes from: ``"measured: 4 heights of this study in 0.12 s"`` or
+        ``"assumed ..."`` (:data:`EVALUATIONS_PER_SECOND_PER_WORKER`); printed with the estimate.
+    what : str
+        What the size is of, when not simply the run (a growing Sobol' study: up to n_max).
     """
 
     n_rows: int
@@ -382,6 +409,9 @@ class RunSize:
     seconds: float
     free_bytes: int
     workers: int
+    rate: float = EVALUATIONS_PER_SECOND_PER_WORKER
+    basis: str = ""
+    what: str = ""
 
     @property
     def evaluations(self) -> int:
@@ -392,9 +422,10 @@ class RunSize:
         return self.bytes > LARGE_RUN_BYTES or self.seconds > LARGE_RUN_SECONDS
 
     def describe(self) -> str:
-        return (f"{self.n_rows:,} samples x {self.n_scenes} scenes = {self.evaluations:,} "
-                f"evaluations, a result file of {_bytes(self.bytes)}, about "
-                f"{_duration(self.seconds)} on {self.workers} workers")
+        basis = f" ({self.rate:.3g} heights/s per worker, {self.basis})" if self.basis else ""
+        return (f"{self.what}{self.n_rows:,} samples x {self.n_scenes} scenes = "
+                f"{self.evaluations:,} evaluations, a result file of {_bytes(self.bytes)}, about "
+                f"{_duration(self.seconds)} on {self.workers} workers{basis}")
 
 
 def _bytes(n: float) -> str:
@@ -412,9 +443,15 @@ def _duration(seconds: float) -> str:
     return f"{seconds:.2g} s"
 
 
-def run_size(study: Study, path: Path, workers: int | None = None) -> RunSize:
+def run_size(study: Study, path: Path, workers: int | None = None, *,
+             solver: Callable | None = None, measure: bool = True,
+             evaluations: int | None = None) -> RunSize:
     """The size of a run of `study` into `path` (see :class:`RunSize`), from the file's
-    layout (:func:`skidmc.ensemble.storage.estimated_bytes`) and the recorded rate."""
+    layout (:func:`skidmc.ensemble.storage.estimated_bytes`) and a rate per worker: measured
+    on the study's own first heights (:func:`measured_rate`, with `solver`) where the run
+    is long enough for it to matter (:data:`MEASURE_FROM_SECONDS`) and fits the disk,
+    else :data:`EVALUATIONS_PER_SECOND_PER_WORKER`. `evaluations`: those still to compute,
+    when not all of the study's (a run that continues one)."""
     import shutil
 
     from skidmc.ensemble.storage import estimated_bytes
@@ -429,8 +466,61 @@ def run_size(study: Study, path: Path, workers: int | None = None) -> RunSize:
         free = shutil.disk_usage(where).free
     except OSError:
         free = -1
-    seconds = study.n_rows * len(study.scenes) / (EVALUATIONS_PER_SECOND_PER_WORKER * slots)
-    return RunSize(study.n_rows, len(study.scenes), estimated_bytes(study), seconds, free, slots)
+    size_bytes = estimated_bytes(study)
+    todo = study.n_rows * len(study.scenes) if evaluations is None else evaluations
+    rate = EVALUATIONS_PER_SECOND_PER_WORKER
+    basis = (f"assumed: the rate of benchmarks/throughput.py at rtol 1e-2, "
+             f"{EVALUATIONS_PER_SECOND_PER_WORKER:g}/s; not measured")
+    fits = free < 0 or size_bytes + DISK_MARGIN_BYTES <= free
+    if measure and fits and study.solver.backend == "cpu" \
+            and todo / (rate * slots) >= MEASURE_FROM_SECONDS:
+        measured = measured_rate(study, solver)
+        if measured is not None:
+            rate, count, seconds = measured
+            basis = (f"measured: {count} heights of this study in {seconds:.2g} s in this "
+                     "process")
+    return RunSize(study.n_rows, len(study.scenes), size_bytes, todo / (rate * slots), free,
+                   slots, rate, basis)
+
+
+def measured_rate(study: Study, solver: Callable | None = None,
+                  heights: int = MEASURE_HEIGHTS,
+                  budget: float = MEASURE_SECONDS) -> tuple[float, int, float] | None:
+    """Heights per second [1/s] of one worker on this study, timed in this process: first one
+    untimed warm-up height per scene (its first sample: the compiled kernels a scene needs
+    load, or compile, on its first height; a layered target needs others than a homogeneous
+    one), then its next samples, scene after scene as a run evaluates them; at most `heights`
+    timed, and no more once `budget` seconds [s] are spent. Returns (rate, heights timed,
+    seconds) or None when nothing could be timed (a study of one row per scene). The heights
+    are computed again by the run (a few seconds at most)."""
+    from skidmc.ensemble.evaluate import evaluate_here
+    from skidmc.ensemble.sampling import StudySampler
+
+    n_scenes = len(study.scenes)
+    rows = min(study.n_rows, 1 + -(-heights // n_scenes))
+    if rows < 2:
+        return None
+    drawn = StudySampler(study).draw(0, rows)
+    options = solver_kwargs(study.solver)
+    options.pop("backend", None)
+
+    def solve(j: int, i: int) -> float:
+        columns = {key: v[i:i + 1] for key, v in drawn[j].items() if key in SI_UNITS}
+        t0 = time.perf_counter()
+        evaluate_here(columns, options, study.scenes[j].scene, solver)
+        return time.perf_counter() - t0
+
+    for j in range(n_scenes):
+        solve(j, 0)  # the warm-ups
+    timed, spent = 0, 0.0
+    for i, j in [(i, j) for i in range(1, rows) for j in range(n_scenes)][:heights]:
+        spent += solve(j, i)
+        timed += 1
+        if spent >= budget:
+            break
+    if timed == 0 or spent <= 0.0:
+        return None
+    return timed / spent, timed, spent
 
 
 def check_size(size: RunSize, path: Path, confirm: Callable[[RunSize], bool] | None) -> None:
@@ -528,7 +618,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                 executor.shutdown()
             executor, owned = None, False
         path = _resolve_out(study, out)
-        lock = _lock_folder(path)
+        lock = lock_output(path)
         command = command or f"run_study({study.file!r}, n={study.design.n})"
         report = RunReport(path=path, n_rows=study.n_rows, n_scenes=len(study.scenes),
                            timeline=[] if timeline else None)
@@ -547,7 +637,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
         work = path.with_name(path.name + ".new")  # --force: the new file until complete
         created = action == "new" or (action == "replace" and not work.exists())
         if created:
-            check_size(run_size(study, path, workers), path, confirm)
+            check_size(run_size(study, path, workers, solver=solver), path, confirm)
         file = _open_result_file(study, path, action, work)
         todo = ~file.done()
         try:
@@ -603,15 +693,58 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
         if executor is not None and owned:
             executor.shutdown()
         if lock is not None:
-            os.close(lock)  # releases the lock
+            lock.release()
     return report
 
 
-def _lock_folder(path: Path) -> int | None:
-    """Hold the result file's folder for this run (an exclusive ``flock`` on the folder,
-    released when the run ends, also by a kill): a second run into the same folder is refused
-    at once with a clear message instead of an HDF5 lock error or a missing ``.new.tmp``.
-    None where the folder cannot be made or locked (the file's creation then says why)."""
+class OutputLock:
+    """This process's hold on one result file (see :func:`lock_output`); :meth:`release` ends
+    it (also a kill does: the kernel drops an ``flock`` with its process)."""
+
+    def __init__(self, key, fd: int, lock_path: Path) -> None:
+        self._key, self._fd, self.lock_path = key, fd, lock_path
+
+    def release(self) -> None:
+        """Let go of the file (once; a nested hold of the same file by this process lets go
+        when the outermost one does)."""
+        if self._fd is None:
+            return
+        held = _HELD.get(self._key)
+        if held is not None:
+            held[1] -= 1
+            if held[1] > 0:  # an outer hold of this process still runs
+                self._fd = None
+                return
+            del _HELD[self._key]
+            try:
+                self.lock_path.unlink()  # still ours: we hold its lock
+            except OSError:
+                pass
+            os.close(held[0])
+        self._fd = None
+
+    def __enter__(self) -> OutputLock:  # noqa: PYI034 - not subclassed
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+#: The result files this process holds: (device, inode of the lock file, thread) -> [fd, holds].
+_HELD: dict = {}
+
+
+def lock_output(path: Path) -> OutputLock | None:
+    """Hold the result file `path` for this run: an exclusive ``flock`` on ``.<name>.lock``
+    beside it, made for the run and removed when it ends (a run killed with -9 leaves it, an
+    empty file that the next run takes over). A second run on the same file (whatever path
+    names it: the lock is on the file's inode) is refused at once with a clear message instead
+    of an HDF5 lock error or a missing ``.new.tmp``; runs on other files of the same folder go
+    on side by side. The file's work files (``.new``, ``.compact``) share its hold. Nested
+    holds of one file by one thread (a growing Sobol' study's steps) are counted, not refused;
+    another thread of the same process is refused like another process.
+    None where no lock can be made (the file's creation then says why).
+    """
     import errno
 
     from skidmc.ensemble.storage import StorageError
@@ -622,21 +755,40 @@ def _lock_folder(path: Path) -> int | None:
         return None
 
     folder = path.absolute().parent
+    lock_path = folder / f".{path.name}.lock"
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        fd = os.open(folder, os.O_RDONLY)
     except OSError:
         return None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError as exc:
-        os.close(fd)
-        if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-            raise StorageError(path, f"another skidmc run holds this output (its folder "
-                               f"{folder} is locked by a run in progress); wait for it to end "
-                               "or choose another --out") from None
-        return None
-    return fd
+    for _ in range(10):  # retried only when another run removed the file between open and lock
+        try:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError:
+            return None
+        st = os.fstat(fd)
+        key = (st.st_dev, st.st_ino, threading.get_ident())
+        if key in _HELD:  # this thread holds it already (a nested run)
+            os.close(fd)
+            _HELD[key][1] += 1
+            return OutputLock(key, _HELD[key][0], lock_path)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            os.close(fd)
+            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise StorageError(path, "another skidmc run holds this output (a run in "
+                                   f"progress writes it: {lock_path.name} is locked); wait for "
+                                   "it to end or choose another --out") from None
+            return None
+        try:
+            same = os.stat(lock_path).st_ino == st.st_ino
+        except OSError:
+            same = False
+        if same:
+            _HELD[key] = [fd, 1]
+            return OutputLock(key, fd, lock_path)
+        os.close(fd)  # the holder removed it as we opened it: take the new one
+    return None
 
 
 class _Draws:

@@ -78,6 +78,7 @@ __all__ = [
     "VariableSpec",
     "default_path",
     "ensemble_variables",
+    "flag_counts",
     "inspect_file",
     "open_ensemble",
     "summarize_file",
@@ -172,7 +173,10 @@ OUTPUTS: tuple[VariableSpec, ...] = (
         "comment": "ok; censored_above: no event up to solver h_max; censored_below: event at "
                    "solver h_min; failed: see failure_reason; empty: not evaluated yet"}),
     VariableSpec("evaluations", "i4", "1", "number of impact simulations used"),
-    VariableSpec("flags", "str", "-", "solver flags (comma separated)", width=64),
+    # 128: the model's validity flags that can occur together take up to ~60 characters
+    # (tests/test_extremes.py), rtol_unmet and implausible_input 29 more (files written with
+    # 64 keep their width: EnsembleFile.write_chunk writes to the file's own width)
+    VariableSpec("flags", "str", "-", "solver flags (comma separated)", width=128),
     VariableSpec("failure_reason", "str", "-", "why the sample failed (exception type and "
                  "message)", width=256),
 )
@@ -495,8 +499,8 @@ class EnsembleFile:
         sl = (slice(None), slice(start, stop)) if self._multi else (slice(start, stop),)
         for spec in self.variables:
             values = np.asarray(columns[spec.name])
-            if spec.dtype == "str":
-                f[spec.name][(*sl, slice(None))] = _encode(values, spec.width)
+            if spec.dtype == "str":  # the file's own width (an older file's may be narrower)
+                f[spec.name][(*sl, slice(None))] = _encode(values, f[spec.name].shape[-1])
             else:
                 f[spec.name][sl] = values.astype(spec.dtype, copy=False)
         f.flush()  # data on disk before the flags that vouch for them
@@ -768,6 +772,9 @@ class SceneSummary:
     median_bound : str
     range_bound : tuple of str
         Qualifiers of p05 and p95.
+    flags : dict
+        Flag -> written samples carrying it (the solver's validity flags, ``rtol_unmet``,
+        ``implausible_input``; :func:`flag_counts`), most frequent first.
     """
 
     scene: str
@@ -782,6 +789,27 @@ class SceneSummary:
     p95: float
     median_bound: str = ""
     range_bound: tuple[str, str] = ("", "")
+    flags: dict = dataclasses.field(default_factory=dict)
+
+
+def flag_counts(flags) -> dict[str, int]:
+    """Flag -> how many of the samples carry it, most frequent first, from an array of
+    comma-separated flag strings (the ``flags`` variable of an ensemble, any shape)."""
+    from collections import Counter
+
+    counts = Counter(flag for text in np.asarray(flags, dtype=object).ravel().tolist()
+                     for flag in str(text).split(",") if flag)
+    return dict(counts.most_common())
+
+
+def _flag_words(raw: np.ndarray, attrs) -> np.ndarray:
+    """Flags as comma-separated text from either layout: fixed-width chars (appendable) or
+    indices into ``flag_meanings`` (compact; "none" is index 0)."""
+    if raw.dtype == "S1":
+        return _decode_chars(raw)
+    meanings = str(attrs.get("flag_meanings", "")).split(" ")
+    table = np.array(["" if i == 0 else m for i, m in enumerate(meanings)], dtype=object)
+    return table[raw.astype(np.intp)]
 
 
 def _decode_chars(chars: np.ndarray) -> np.ndarray:
@@ -947,17 +975,20 @@ def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
             done = f["done"][:].astype(bool)
             heights = np.atleast_2d(f["critical_height"][...])
             status = _status_words(f["status"][...])
+            flags = (_flag_words(f["flags"][...], f["flags"].attrs) if "flags" in f
+                     else np.full(status.shape, "", dtype=object))
             names = ([s.decode() if isinstance(s, bytes) else str(s) for s in f["scene"][...]]
                      if "scene" in f else [str(attrs.get("study_name", ""))])
         except (OSError, KeyError, RuntimeError, ValueError) as exc:
             raise StorageError(path, f"is damaged: its results cannot be read ({exc}); "
                                f"{_DAMAGED_HINT}", damaged=True) from None
     status = np.atleast_2d(status)
+    flags = np.atleast_2d(flags)
     meta = EnsembleAttrs.read(attrs)
     h_min, h_max = meta.solver_h_min, meta.solver_h_max
     out = []
-    for name, h, st in zip(names, heights, status):
-        h, st = h[done], st[done]
+    for name, h, st, fl in zip(names, heights, status, flags):
+        h, st, fl = h[done], st[done], fl[done]
         counts = {k: int(np.count_nonzero(st == k)) for k in STATUSES}
         usable = h[(st != "failed") & np.isfinite(h)]
         if usable.size:
@@ -976,7 +1007,8 @@ def summarize_file(path: str | os.PathLike) -> list[SceneSummary]:
             scene=name, samples=int(done.size), written=int(done.sum()), ok=counts["ok"],
             censored_above=counts["censored_above"], censored_below=counts["censored_below"],
             failed=counts["failed"], median=float(median), p05=float(p05), p95=float(p95),
-            median_bound=bound(median), range_bound=(bound(p05), bound(p95))))
+            median_bound=bound(median), range_bound=(bound(p05), bound(p95)),
+            flags=flag_counts(fl)))
     return out
 
 

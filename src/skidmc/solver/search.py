@@ -53,7 +53,7 @@ from skidmc.solver.plan import (
     plan_for_rtol,
     root_tolerance,
 )
-from skidmc.solver.results import HeightResult
+from skidmc.solver.results import HeightResult, flag_unmet_rtol
 from skidmc.solver.roots import (
     FAST_GUESS_ERROR,
     FOLD_SLOPE,
@@ -155,19 +155,25 @@ class SceneUnsolvable(SolverError, SkidmcError):
 
         odd = implausible_inputs(scene) if isinstance(scene, Scene) else ()
         why = f"{type(exc).__name__}: {exc}"
-        hint = ("; inputs outside their plausible range: " + "; ".join(odd)) if odd else ""
-        super().__init__(f"the solver could not finish this scene ({why}){hint}")
+        # the likely cause first: a run's reasons are kept to 256 characters
+        hint = " (likely cause: " + "; ".join(odd) + ")" if odd else ""
+        super().__init__(f"the solver could not finish this scene{hint}: {why}")
         self.cause, self.implausible = why, odd
 
 
 def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
                     **kwargs):
     try:
-        return _critical_height(scene, rtol, tier, h_min, h_max, **kwargs)
+        res = _critical_height(scene, rtol, tier, h_min, h_max, **kwargs)
     except (SolverError, ArithmeticError, ValueError) as exc:
         if isinstance(exc, (SkidmcError, TypeError)):  # argument errors name their argument
             raise
         raise SceneUnsolvable(scene, exc) from exc
+    if tier == "full" and kwargs.get("level") is None and kwargs.get("model") is None:
+        # rtol chose the plan: never silently unmet (the fast tier and a forced level or
+        # model do not aim at rtol)
+        res = flag_unmet_rtol(res, rtol)
+    return res
 
 
 def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
@@ -315,7 +321,10 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
 critical_height.__doc__ = _critical_height.__doc__.replace(
     "    Returns\n",
     "    A failure of the solver on a valid scene raises :class:`SceneUnsolvable` (a\n"
-    "    :class:`SolverError` naming the inputs outside their plausible range).\n\n"
+    "    :class:`SolverError` naming the inputs outside their plausible range). A result whose\n"
+    "    ``error_estimate`` stayed above ``rtol`` (the search refined as far as it goes) carries\n"
+    "    the flag ``\"rtol_unmet\"`` (:data:`skidmc.solver.results.RTOL_UNMET`); its\n"
+    "    ``error_estimate`` is the one reached.\n\n"
     "    Returns\n", 1)
 critical_height.__wrapped__ = _critical_height  # inspect.signature: the full signature
 

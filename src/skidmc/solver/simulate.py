@@ -28,10 +28,34 @@ from skidmc.physics.thermal import (
     simulate_kernel,
 )
 
-__all__ = ["MAX_STEPS", "LinearPrefix", "Simulation", "SolverError", "kernel_arguments",
-           "simulate"]
+__all__ = ["MAX_STEPS", "STALL_ATTEMPTS_LEVEL0", "STALL_FACTOR", "STALL_FLOOR", "LinearPrefix",
+           "Simulation", "SolverError", "kernel_arguments", "simulate", "stall_cap", "step_cap"]
 
+#: Most step attempts (accepted + rejected) of any run [1]: the cap of a run at level 4 and
+#: above, and of a caller that names no model's level.
 MAX_STEPS = 200_000
+
+#: Step attempts per 2^level [1] beyond which a run of :func:`simulate` is stalled and stops
+#: with a :class:`SolverError` (:func:`step_cap`). Every run of the default test suite
+#: (5,912 runs, levels 0-4 and forced ones up to 7, presets, the off-preset and extremes
+#: matrices, validation scenes) took at most 1,249 x 2^level attempts (at level 2.5; 847 at
+#: 1.5, 821 at 4); this is 10x that. A stalled run (a melting step with he.heat_of_fusion =
+#: 1e10 J/kg: 135,618 steps and 64,382 rejections, each attempt ~50x a normal one's cost
+#: through failing Newton iterations) went on to MAX_STEPS, 15-18 s on an idle machine before
+#: its sample failed (a search reaches that run at level 2.5, where this cap is 70,710).
+STALL_ATTEMPTS_LEVEL0 = 12_500
+
+#: A run is also stalled beyond this many times the most attempts of the earlier runs of its
+#: search at its level (the runs sharing a :class:`LinearPrefix`; :func:`stall_cap`), but
+#: never below :data:`STALL_FLOOR` attempts [1]. On the 3,314 later runs of the searches of
+#: the solver's test files (extremes matrix, error estimate, adaptive, signs-only, two-level,
+#: root tolerance, layered and soft targets, linear prefix, presets), a run took at most
+#: 10.9x the most of the runs before it (1,563 attempts after runs of at most 144, at level
+#: 2.5), and at most 2.4x where it took over 2,000:
+#: every one of them stays 2.5x or more below these caps. The stalled run above stops at
+#: 4,600 attempts (after runs of 460) instead of going on to 70,710 or 200,000.
+STALL_FACTOR = 10
+STALL_FLOOR = 4_000
 
 
 class SolverError(RuntimeError):
@@ -78,6 +102,7 @@ class LinearPrefix:
         self.model = model            # the one model whose runs may use it
         self.array = np.zeros(prefix_size(model.width.shape[0]))
         self.recorded_height = None   # [m]: the height of the run that recorded it
+        self.most_attempts = 0        # the most step attempts of a run given it (stall_cap)
 
     def mode(self, height):
         """The kernel's ``prefix_mode`` for a run at ``height`` [m]."""
@@ -117,7 +142,32 @@ def kernel_arguments(model, height, *, max_steps=MAX_STEPS, flux_override=None,
             sign_commit_fraction, np.zeros(0) if prefix is None else prefix, prefix_mode)
 
 
-def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=None,
+def step_cap(model) -> int:
+    """Most step attempts [1] of a run of `model` before it counts as stalled:
+    :data:`STALL_ATTEMPTS_LEVEL0` x 2^level (the level read from the model's step tolerance,
+    which falls 8x per level: :func:`skidmc.solver.model.level_resolution`), at most
+    :data:`MAX_STEPS`."""
+    from skidmc.solver.model import BASE_RESOLUTION
+
+    tol = getattr(getattr(model, "resolution", None), "tol_temperature", None)
+    if not isinstance(tol, float) or not tol > 0.0:
+        return MAX_STEPS
+    level = max(0.0, math.log2(BASE_RESOLUTION.tol_temperature / tol) / 3.0)
+    return int(min(MAX_STEPS, STALL_ATTEMPTS_LEVEL0 * 2.0 ** level))
+
+
+def stall_cap(model, prefix=None) -> int:
+    """Most step attempts [1] of a run of `model` before it counts as stalled: the level's
+    :func:`step_cap`, and, where the runs of one search share `prefix` (a
+    :class:`LinearPrefix`), :data:`STALL_FACTOR` x the most attempts of its earlier runs (at
+    least :data:`STALL_FLOOR`)."""
+    cap = step_cap(model)
+    if prefix is not None and prefix.model is model and prefix.most_attempts > 0:
+        cap = min(cap, max(STALL_FLOOR, STALL_FACTOR * prefix.most_attempts))
+    return cap
+
+
+def simulate(model, height, *, record=False, max_steps=None, flux_override=None,
              until_exit=False, prefix=None):
     """Simulate the impact from drop height ``height`` [m].
 
@@ -128,6 +178,9 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
         Vertical drop height H [m].
     record : bool
         Keep the interface temperature history (for checks and figures).
+    max_steps : int, optional
+        Most step attempts (accepted + rejected) before the run counts as stalled and raises
+        :class:`SolverError`; default :func:`stall_cap` of the model (and `prefix`).
     flux_override : tuple, optional
         ``(q0, s, c, omega, t_exit, q_ext)`` to impose another flux shape (tests).
     until_exit : bool
@@ -151,6 +204,8 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
     -------
     Simulation
     """
+    if max_steps is None:
+        max_steps = stall_cap(model, prefix)
     n_rec = max_steps if record else 0
     rec_t = np.zeros(min(n_rec, 100_000))
     rec_tb = np.zeros_like(rec_t)
@@ -165,8 +220,15 @@ def simulate(model, height, *, record=False, max_steps=MAX_STEPS, flux_override=
                                              prefix_mode=mode))
     if mode == PREFIX_WRITE and prefix.array[_PX_VALID] == 1.0:
         prefix.recorded_height = float(height)
+    if prefix is not None:
+        prefix.most_attempts = max(prefix.most_attempts,
+                                   int(info[INFO_STEPS] + info[INFO_REJECTED]))
     if info[INFO_FAILED] or (info[INFO_STEPS] + info[INFO_REJECTED] >= max_steps
                              and not info[INFO_EVENT]):
+        if not info[INFO_FAILED]:  # at the cap (stall_cap): short, a run keeps 256 characters
+            raise SolverError(
+                f"time integration stalled at H = {height:.6g} m ({max_steps} step attempts, "
+                f"{int(info[INFO_REJECTED])} rejected)")
         raise SolverError(
             f"time integration failed at H = {height:.6g} m after {int(info[INFO_STEPS])} "
             f"steps ({int(info[INFO_REJECTED])} rejected)")

@@ -74,6 +74,7 @@ def run(study, options: RunOptions) -> Outcome:
         failed = report.status_counts.get("failed", 0)
         if failed and failed < report.evaluated:
             lines.append(f"skidmc run: {failed} samples failed; see failure_reason in the file")
+        lines += flag_summary_lines(report.path)
     if report.evaluated and report.status_counts.get("failed", 0) == report.evaluated:
         # nothing usable: an input the solver cannot take, most likely; exit 1 with the reasons
         lines.append(f"skidmc run: error: all {report.evaluated} evaluations failed: "
@@ -184,3 +185,24 @@ def scene_summary_lines(path) -> list[str]:
             f"censored {s.censored_above} above, {s.censored_below} below; "
             f"failed {s.failed} of {s.written}{todo}")
     return lines
+
+
+def flag_summary_lines(path) -> list[str]:
+    """The written samples flagged ``rtol_unmet`` or ``implausible_input``
+    (:data:`skidmc.solver.results.RESULT_FLAG_MEANINGS`) counted per scene, after the summary of
+    :func:`scene_summary_lines`; none when no sample carries either (the model's validity flags,
+    routine on some targets, are counted in the report)."""
+    from skidmc.ensemble.storage import summarize_file
+    from skidmc.solver.results import RESULT_FLAG_MEANINGS
+
+    flagged = [(s.scene, {f: n for f, n in s.flags.items() if f in RESULT_FLAG_MEANINGS})
+               for s in summarize_file(path)]
+    flagged = [(scene, flags) for scene, flags in flagged if flags]
+    if not flagged:
+        return []
+    width = max(len(scene) for scene, _ in flagged)
+    seen = sorted({f for _, flags in flagged for f in flags})
+    meanings = "; ".join(f"{f}: {RESULT_FLAG_MEANINGS[f]}" for f in seen)
+    return [f"skidmc run: warning: flagged samples ({meanings}):"] + [
+        f"  {scene:<{width}}  " + ", ".join(f"{flag} {n}" for flag, n in flags.items())
+        for scene, flags in flagged]

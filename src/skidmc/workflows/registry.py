@@ -115,7 +115,7 @@ class RunOptions:
         Told a new run's size (:class:`skidmc.ensemble.run.RunSize`) before its file is made;
         returns whether to go on (``skidmc run``: prints it, asks about a large run).
     yes : bool
-        ``--yes``: a large run goes on without asking (the kinds that ask: ensemble).
+        ``--yes``: a large run goes on without asking (the kinds that ask: ensemble, sobol).
     """
 
     out: str | None = None

@@ -19,18 +19,20 @@ recomputes from the first N; ``--workers`` and ``--scheduler`` are those of ever
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Callable
 from pathlib import Path
 
-from skidmc.workflows.ensemble import ensemble_report, scene_summary_lines
+from skidmc.workflows.ensemble import ensemble_report, flag_summary_lines, scene_summary_lines
 from skidmc.workflows.registry import Outcome, ReportOptions, RunOptions
 
 __all__ = ["DESCRIPTION", "REPORT_OPTIONS", "RUN_OPTIONS", "GrowthStep", "default_out", "detect",
-           "load", "report", "run", "run_until_stable"]
+           "growth_size", "load", "report", "run", "run_until_stable"]
 
 DESCRIPTION = "a saltelli design whose N doubles until the Sobol' indices are stable"
-RUN_OPTIONS = frozenset({"out", "n", "resume", "force", "workers", "scheduler", "chunk_size"})
+RUN_OPTIONS = frozenset({"out", "n", "resume", "force", "workers", "scheduler", "chunk_size",
+                         "yes"})
 REPORT_OPTIONS = frozenset({"out", "confidence"})
 
 
@@ -77,13 +79,13 @@ def run(study, options: RunOptions) -> Outcome:
                              scheduler=options.scheduler, resume=options.resume,
                              chunk_size=options.chunk_size,
                              progress=False if options.quiet else None, solver=options.solver,
-                             force=options.force, log=log)
+                             force=options.force, log=log, confirm=options.confirm)
     path = _result_path(study, options.out)
     stable = all(steps[-1]["stable"].values())
     if not options.quiet:
         lines.append(f"skidmc run: N = {steps[-1]['n']}: Sobol' indices "
                      f"{'stable' if stable else 'NOT stable (n_max reached)'}")
-        lines += scene_summary_lines(path)
+        lines += scene_summary_lines(path) + flag_summary_lines(path)
     return Outcome(0, path, tuple(lines))
 
 
@@ -132,11 +134,55 @@ def _stability(path: Path, threshold: float, half_width: float, resamples: int,
     return stable, widest
 
 
+def growth_size(study, path: Path, workers: int | None = None, *,
+                solver: Callable | None = None, force: bool = False):
+    """The size of growing `study` into `path` up to its ``n_max`` (a
+    :class:`~skidmc.ensemble.run.RunSize`), before it starts, or None when nothing is left to
+    compute: the rows of the largest N of the ladder (N doubling from ``design.n`` while
+    <= n_max) less those a complete run of this study in `path` already holds (reused unless
+    `force`); bytes for the largest step, whose grown file and the result it grows from lie
+    side by side on the disk."""
+    import dataclasses
+
+    from skidmc.ensemble.run import run_size
+    from skidmc.ensemble.storage import estimated_bytes, inspect_file
+
+    design = study.design
+    n_top = design.n
+    while 2 * n_top <= design.n_max:
+        n_top *= 2
+    top = study.with_n(n_top)
+    done = 0
+    if not force and path.is_file():
+        try:
+            info = inspect_file(path)
+        except Exception:  # noqa: BLE001 - a damaged file is the growth's own to report
+            info = {}
+        if info.get("skidmc") and info.get("complete") \
+                and info.get("study_sha256") == study.sha256:
+            done = min(info["n_rows"], top.n_rows)
+            try:  # the growth this file ends: stable there, nothing is left to compute
+                record = json.loads((path.parent / "convergence.json").read_text())
+                if record.get("stable") and record["steps"][-1]["rows"] == info["n_rows"]:
+                    return None
+            except (OSError, ValueError, KeyError, IndexError, TypeError):
+                pass
+    todo = (top.n_rows - done) * len(top.scenes)
+    if todo <= 0:
+        return None
+    size = run_size(top, path, workers, solver=solver, evaluations=todo)
+    before = estimated_bytes(study.with_n(n_top // 2)) if n_top > design.n else 0
+    what = (f"growing N from {design.n} up to {n_top} (n_max {design.n_max}; it stops "
+            "earlier once the indices are stable), at most: ")
+    return dataclasses.replace(size, bytes=size.bytes + before, what=what)
+
+
 def run_until_stable(study, out=None, *, workers: int | None = None, progress: bool | None = None,
                      solver: Callable | None = None, resamples: int = 1000, seed: int = 0,
                      force: bool = False, resume: bool = False, scheduler=None,
                      chunk_size: int | None = None,
-                     log: Callable[[str], None] = print) -> list[GrowthStep]:
+                     log: Callable[[str], None] = print,
+                     confirm: Callable | None = None) -> list[GrowthStep]:
     """Run a ``saltelli`` study, doubling N until its Sobol' indices are stable or N = n_max.
 
     Parameters
@@ -157,14 +203,18 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
         belongs to this study and the N it grows to; otherwise it is discarded.
     log : callable
         Receives one line per step.
+    confirm : callable, optional
+        Told the growth's size up to n_max (:func:`growth_size`) before anything is computed,
+        as :func:`skidmc.ensemble.run.execute_study` tells a run's; returns whether to go on.
+        A growth that cannot fit the free disk is refused whatever it says
+        (:class:`~skidmc.ensemble.run.RunTooLarge`, as a refused run).
 
     Returns
     -------
     list of GrowthStep
         Also written to ``convergence.json`` beside the result.
     """
-    from skidmc.ensemble.run import execute_study
-    from skidmc.ensemble.storage import EnsembleFile, inspect_file
+    from skidmc.ensemble.run import check_size, lock_output
     from skidmc.ensemble.study import Study, load_study
 
     if not isinstance(study, Study):
@@ -174,6 +224,27 @@ def run_until_stable(study, out=None, *, workers: int | None = None, progress: b
         raise ValueError(f"design = {design.method!r}, n_max = {design.n_max!r}: the growth "
                          "needs a saltelli design with n_max")
     path = _result_path(study, out)
+    # The result is held for the whole growth (its steps' runs hold it again, nested): a
+    # second run on it is refused before it touches the grown file.
+    lock = lock_output(path)
+    try:
+        size = growth_size(study, path, workers, solver=solver, force=force)
+        if size is not None:
+            check_size(size, path, confirm)
+        return _grow(study, path, design, workers=workers, progress=progress, solver=solver,
+                     resamples=resamples, seed=seed, force=force, resume=resume,
+                     scheduler=scheduler, chunk_size=chunk_size, log=log)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _grow(study, path, design, *, workers, progress, solver, resamples, seed, force, resume,
+          scheduler, chunk_size, log) -> list[GrowthStep]:
+    """The growth of :func:`run_until_stable`, its result file held and its size checked."""
+    from skidmc.ensemble.run import execute_study
+    from skidmc.ensemble.storage import EnsembleFile, inspect_file
+
     n = design.n
     grown = path.with_name(path.stem + ".grow.h5")
     if force and grown.is_file():

@@ -250,6 +250,13 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str,
             f"{_triple(iv['h50'])} | {_triple(iv['sigma'])} | {_triple(iv['h01'])} | "
             f"{_triple(iv['h10'])} | {_triple(iv['h90'])} | {a.fit.verdict} "
             f"(PPCC p = {_fmt(a.fit.p_value, 2)}) |")
+    flagged = [a for a in analyses if a.counts.get("flags")]
+    if flagged:  # issue 44: never silently unmet rtol or implausible inputs
+        lines += ["", "Flagged samples (written samples carrying each flag; `rtol_unmet`: the "
+                  "requested rtol was not reached, `implausible_input`: an input outside its "
+                  "plausible range): " + "; ".join(
+                      f"{a.scene}: " + ", ".join(f"{k} {v}" for k, v in a.counts["flags"].items())
+                      for a in flagged)]
     nested = [a for a in analyses if a.epistemic is not None]
     if nested:
         lines += ["", "## Epistemic spread", "",
