@@ -106,10 +106,10 @@ SELF_HEATING_TIME = 3600.0
 #: otherwise it takes k(T), c(T) in every target cell ("temperature_target"). The bound: the
 #: interface's rise under a flux q is ~ q sqrt(t) / (e_HE + e_t) (report Eq. 16's split), and
 #: q ~ sqrt(H), so at a fixed ignition temperature H ~ (e_HE + e_t)^2 and |d ln H| <= 2 |d ln e_t|
-#: = |d ln k| + |d ln c|. It overstates the measured effect about threefold (constant
-#: properties at the interface's mean temperature moved H_c by 27-45 % where the bound gives
-#: 80-110 %: results/validation/temperature_dependence.md). A tenth of rtol leaves the rest of
-#: the budget to the discretisation, melting width and root (skidmc.solver.plan).
+#: = |d ln k| + |d ln c|. It overstates the measured effect 1.5-3.5 fold (constant
+#: properties at the interface's mean temperature moved ln H_c by 0.31-0.37 where the bound
+#: gives 0.54-1.08: results/validation/temperature_dependence.md). A tenth of rtol leaves the
+#: rest of the budget to the discretisation, melting width and root (skidmc.solver.plan).
 PROPERTY_BUDGET_FRACTION = 0.1
 
 #: "hot_ignition": the kinetics need the HE above this temperature [K] to run away within the
