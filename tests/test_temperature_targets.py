@@ -268,3 +268,38 @@ def test_the_critical_height_of_tabled_alumina_converges():
     res = critical_height(s, rtol=1e-3)
     assert "temperature_target" in res.flags
     assert abs(res.critical_height / richardson - 1) < res.error_estimate
+
+
+def test_the_cuda_backend_hands_tabled_targets_back_under_the_simulator():
+    """Through the CUDA kernel (numba's simulator, in a subprocess, as tests/test_device.py):
+    a tabled scene's result is the CPU search's, bit for bit, with its flag; the same scene
+    without its table, beside it, is the device's."""
+    import json
+    import subprocess
+    import sys
+    import textwrap
+
+    from conftest import ROOT, subprocess_env
+
+    code = """
+        import json
+        from skidmc.scene import make_scene
+        from skidmc.solver import critical_height
+        from skidmc.solver.cuda import solve_scenes
+        tabled = make_scene(preset="paper-quartz", target="fused-quartz", mu=0.2)
+        plain = tabled.replace(**{"target.table": ""})
+        out = solve_scenes([tabled, plain], backend="cuda", rtol=1e-2)
+        cpu = critical_height(tabled, rtol=1e-2)
+        print(json.dumps({"height": [r.critical_height for r in out] + [cpu.critical_height],
+                          "method": [r.method for r in out], "flags": [r.flags for r in out]}))
+    """
+    env = subprocess_env(ROOT / "src", ROOT / "tests")
+    env["NUMBA_ENABLE_CUDASIM"] = "1"
+    proc = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    height, method, flags = result["height"], result["method"], result["flags"]
+    assert method[0] != "device" and height[0] == height[2]
+    assert "temperature_target" in flags[0]
+    assert method[1] == "device" and "temperature_target" not in flags[1]
