@@ -132,7 +132,8 @@ def test_every_documented_flag_has_one_meaning():
                                 re.MULTILINE))
     assert documented == set(FLAG_MEANINGS) == {
         "stops_sliding", "stops_early", "self_heating", "hot_ignition", "crushed", "long_slide",
-        "no_friction", "yielding_target", "layered_target", "top_layer_only"}
+        "no_friction", "yielding_target", "layered_target", "top_layer_only",
+        "temperature_target", "constant_target"}
     assert all(len(text) < 200 and "\n" not in text for text in FLAG_MEANINGS.values())
 
 

@@ -265,7 +265,8 @@ def test_meshless_model_equals_meshed_one(melting):
 
     from skidmc.solver.model import build_model
 
-    mesh_fields = {"width", "rho_c", "face_conductance", "n_target", "q_share_he"}
+    mesh_fields = {"width", "rho_c", "face_conductance", "n_target", "q_share_he",
+                   "target_table"}
     seen = set()
     for scene in _flag_scenes():
         meshed = build_model(scene, melting=melting)

@@ -44,11 +44,13 @@ def test_every_list_of_keys_is_the_table():
     assert SI_UNITS == {k.key: k.si_unit for k in INPUT_KEYS}
     assert DESCRIPTIONS == {k.key: k.description for k in INPUT_KEYS}
     fields = dataclasses.fields(Scene)
-    assert [(f.name, f.type) for f in fields[:-1]] == [
+    assert [(f.name, f.type) for f in fields[:-2]] == [
         (k.key.replace(".", "_"), "str" if k.key == "configuration" else "float")
         for k in INPUT_KEYS]
-    # and, not an input key, a layered target's layers (docs/targets.md)
-    assert (fields[-1].name, fields[-1].type, fields[-1].default) == ("target_layers", "str", "")
+    # and, not input keys, a layered target's layers and a target's temperature table
+    # (docs/targets.md)
+    assert [(f.name, f.type, f.default) for f in fields[-2:]] == [
+        ("target_layers", "str", ""), ("target_table", "str", "")]
 
 
 def test_scene_docstring_lists_every_field_with_its_unit():

@@ -51,7 +51,9 @@ def test_every_entry_is_sourced_has_units_and_builds_a_scene(name):
     scene = make_scene(preset="paper-quartz", target=name)
     assert {key: getattr(scene, key.replace(".", "_")) for key in TARGET_KEYS} == si
     base = get_preset("paper-quartz")  # everything else is the preset's
-    assert scene.replace(**{k: getattr(base, k.replace(".", "_")) for k in TARGET_KEYS}) == base
+    # (a material with a temperature table sets it too: docs/targets.md)
+    assert scene.replace(**{k: getattr(base, k.replace(".", "_")) for k in TARGET_KEYS},
+                         **{"target.table": ""}) == base
 
 
 @pytest.mark.parametrize("name, alpha", INCROPERA_ALPHA.items())

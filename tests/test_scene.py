@@ -128,7 +128,7 @@ def test_vocabulary_tables_cover_every_key():
     assert set(SI_UNITS) == set(DESCRIPTIONS) == set(SCENE_KEYS)
     assert NUMERIC_KEYS == tuple(k for k in SCENE_KEYS if k != "configuration")
     assert [f.name for f in dataclasses.fields(Scene)] == [
-        *(k.replace(".", "_") for k in SCENE_KEYS), "target_layers"]
+        *(k.replace(".", "_") for k in SCENE_KEYS), "target_layers", "target_table"]
     for key in NUMERIC_KEYS:
         ureg.parse_units(SI_UNITS[key])  # every SI unit string is one pint reads
 

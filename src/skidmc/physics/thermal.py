@@ -439,6 +439,39 @@ def _record_prefix(prefix, n, temp, temp_prev, temp_prev2, hist_t, hist_ql, hist
     prefix[_PX_VALID] = 1.0
 
 
+@njit(**_JIT, inline="always")
+def target_properties(temperature, table, m):
+    """A temperature-dependent target's properties at ``temperature`` [K].
+
+    ``table`` holds ``m`` >= 2 nodes as four rows: temperatures T_j [K] (increasing),
+    conductivities k_j [W/(m K)], volumetric heat capacities C_j = rho c_j [J/(m^3 K)] and
+    enthalpies H_j = int_{T_0}^{T_j} C dT [J/m^3]. k and C are linear in T between nodes and
+    constant beyond the ends, so H, their exact integral, is piecewise quadratic (linear beyond
+    the ends): the target's energy is conserved by construction.
+
+    Returns
+    -------
+    k, dk_dT, C, H : float
+        [W/(m K)], [W/(m K^2)], [J/(m^3 K)], [J/m^3].
+    """
+    if temperature <= table[0]:
+        c = table[2 * m]
+        return table[m], 0.0, c, table[3 * m] + c * (temperature - table[0])
+    if temperature >= table[m - 1]:
+        c = table[3 * m - 1]
+        return table[2 * m - 1], 0.0, c, table[4 * m - 1] + c * (temperature - table[m - 1])
+    j = 0
+    while temperature > table[j + 1]:
+        j += 1
+    dt = temperature - table[j]
+    inv_span = 1.0 / (table[j + 1] - table[j])
+    slope_k = (table[m + j + 1] - table[m + j]) * inv_span
+    slope_c = (table[2 * m + j + 1] - table[2 * m + j]) * inv_span
+    c0 = table[2 * m + j]
+    return (table[m + j] + slope_k * dt, slope_k, c0 + slope_c * dt,
+            table[3 * m + j] + dt * (c0 + 0.5 * slope_c * dt))
+
+
 @njit(**_JIT)
 def runaway_temperature(prefactor, activation_temperature, adiabatic_rise, time_scale,
                         fraction):
@@ -480,7 +513,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                     initial_temperature, tol_temperature, dt_initial,
                     runaway_fraction, max_steps, record_t, record_tb, target_effusivity=0.0,
                     he_conductivity=0.0, sign_commit_fraction=0.0, prefix=_NO_PREFIX,
-                    prefix_mode=0):
+                    prefix_mode=0, target_table=_NO_PREFIX, n_table=0):
     """Integrate one impact from t = 0 to an event or ``t_stop``.
 
     Parameters
@@ -557,6 +590,19 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
         PREFIX_MAX_SCALE, nothing recorded), else from t = 0.
     prefix_mode : int
         0 (default), :data:`PREFIX_WRITE` or :data:`PREFIX_RESUME`.
+    target_table : ndarray, shape (4 n_table,)
+        A meshed target's temperature-dependent properties (:func:`target_properties`):
+        temperatures [K], conductivities [W/(m K)], volumetric heat capacities [J/(m^3 K)] and
+        volumetric enthalpies [J/m^3] at ``n_table`` nodes, piecewise linear in T between them
+        (the enthalpy their exact integral). With ``n_table`` >= 2 every target cell takes
+        k(T) and rho c(T) at its own current temperature, inside Newton's iteration (fully
+        implicit, with their derivatives in the Jacobian), and the faces between target cells
+        and at the interface the half-cell resistances w / (2 k(T)) in series; the target's
+        ``rho_c`` and face conductances are then unused, and the linear prefix is off (the
+        equations are no longer linear in T - T0). 0 (default): constant properties, the
+        arrays as given, to the last bit.
+    n_table : int
+        Number of table nodes (0: none).
 
     Returns
     -------
@@ -580,7 +626,7 @@ def simulate_kernel(width, rho_c, face_conductance, n_target, q_share_he,
                       np.empty(n), np.empty(n_he), np.empty(n), np.empty(n), info,
                       target_effusivity, he_conductivity, np.empty(capacity + 1),
                       np.empty(capacity), np.empty(capacity), np.empty(capacity + 1),
-                      sign_commit_fraction, prefix, prefix_mode)
+                      sign_commit_fraction, prefix, prefix_mode, target_table, n_table)
         if info[INFO_HISTORY_FULL] == 0.0 or capacity >= max_steps:
             return info
         capacity = max_steps   # rare (far finer than level 3): run again, with room for every step
@@ -596,7 +642,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                   temp, temp_prev, temp_prev2, temp_new, h, h_prev, h_new,
                   y, y_prev, y_new, hist_h, hist_y, cp, dp, info,
                   target_effusivity, he_conductivity, hist_t, hist_ql, hist_qr, hist_work,
-                  sign_commit_fraction, prefix, prefix_mode):
+                  sign_commit_fraction, prefix, prefix_mode, target_table, n_table):
     """:func:`simulate_kernel` on caller-owned storage, allocating nothing.
 
     The one integrator of both backends: the CPU wrapper :func:`simulate_kernel` allocates the
@@ -626,8 +672,13 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
     prefix, prefix_mode : ndarray, int
         The linear prefix and what to do with it (:func:`simulate_kernel`; mode 0 with any
         array, e.g. a work array, leaves it alone).
+    target_table, n_table : ndarray, int
+        A temperature-dependent target (:func:`simulate_kernel`; ``n_table`` 0 with any array
+        leaves it alone).
     """
     n_he = n - n_target
+    # A temperature-dependent meshed target (n_table nodes; target_properties).
+    tdep = n_table >= 2 and n_target > 0
     for k in range(INFO_SIZE):
         info[k] = 0.0
     for j in range(n_he):
@@ -683,6 +734,8 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
         if i >= n_target:
             h[i], _ = _he_enthalpy(initial_temperature, rho_c[i], latent_v,
                                          melting_point, melt_width)
+        elif tdep:
+            _, _, _, h[i] = target_properties(initial_temperature, target_table, n_table)
         else:
             h[i] = rho_c[i] * initial_temperature
         h_prev[i] = h[i]
@@ -735,7 +788,8 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
     frozen_width = 0.0
 
     # The linear prefix: record it (the run itself is unchanged), or start from it.
-    recording = prefix_mode == PREFIX_WRITE and prefix.shape[0] >= prefix_size(n)
+    recording = (prefix_mode == PREFIX_WRITE and prefix.shape[0] >= prefix_size(n)
+                 and not tdep)
     melt_z = -math.inf
     if recording:
         prefix[_PX_VALID] = 0.0
@@ -745,6 +799,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
             melt_z = 0.5 * math.log(COLD_SOURCE_FRACTION * tol_temperature * rho_c_he
                                     / latent_v)
     if (prefix_mode == PREFIX_RESUME and n_record == 0 and prefix.shape[0] >= prefix_size(n)
+            and not tdep
             and prefix[_PX_VALID] == 1.0 and prefix[_PX_N] == n and prefix[_PX_T] < t_stop
             and prefix[_PX_TOL] == tol_temperature and prefix[_PX_T_EXIT] == t_exit
             and prefix[_PX_T0] == initial_temperature
@@ -862,6 +917,14 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
             g_low = 0.0     # bdt * conductance of the face below cell i
             cp_prev = 0.0
             dp_prev = 0.0
+            if tdep:
+                # The temperature-dependent target: each cell's properties at its current
+                # temperature, carried from the row that needed them first (the face below).
+                tk_next, tdk_next, tc_next, th_next = target_properties(
+                    temp_new[0], target_table, n_table)
+                jac_low_self = 0.0    # d(flow in from below)/dT_i beyond the conductance
+                jac_low_other = 0.0   # d(flow in from below)/dT_{i-1} beyond it
+                d_share = 0.0         # bdt q d(share into the HE)/dT of the last target cell
             for i in range(n):
                 dh_dlow = 0.0
                 dh_dup = 0.0
@@ -869,13 +932,52 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                     h_new[i], dh_dself, dh_dlow, dh_dup = _he_cell_enthalpy(
                         i, n, n_target, temp_new, width, rho_c, latent_v, melting_point,
                         melt_width, melt_spread, frozen_width)
+                elif tdep:
+                    tk, tdk = tk_next, tdk_next
+                    h_new[i] = th_next
+                    dh_dself = tc_next
                 else:
                     h_new[i] = rho_c[i] * temp_new[i]
                     dh_dself = rho_c[i]
                 r = width[i] * (h_new[i] - hist_h[i]) + flow_in
                 d = width[i] * dh_dself + g_low
                 lower = width[i] * dh_dlow - g_low
-                if i < n - 1:
+                up_extra = 0.0
+                if tdep and 0 < i <= n_target:
+                    # The face below depends on both its cells' k(T): d(flow_in)/dT.
+                    d += jac_low_self
+                    lower += jac_low_other
+                if tdep and i < n_target:
+                    # Face i | i+1: half-cell resistances a = w_i / (2 k_i) and b in series,
+                    # G = 1 / (a + b), dG/dT_i = G^2 a k_i' / k_i (and likewise for b).
+                    a_half = width[i] / (2.0 * tk)
+                    if i < n_target - 1:
+                        tk_next, tdk_next, tc_next, th_next = target_properties(
+                            temp_new[i + 1], target_table, n_table)
+                        b_half = width[i + 1] / (2.0 * tk_next)
+                    else:
+                        b_half = 1.0 / g_h   # the first HE cell's half cell
+                    g_face = 1.0 / (a_half + b_half)
+                    dg_self = g_face * g_face * a_half * tdk / tk
+                    dg_other = (g_face * g_face * b_half * tdk_next / tk_next
+                                if i < n_target - 1 else 0.0)
+                    g_up = bdt * g_face
+                    diff = temp_new[i + 1] - temp_new[i]
+                    flow_out = g_up * diff
+                    r -= flow_out
+                    d += g_up - bdt * dg_self * diff
+                    up_extra = -bdt * dg_other * diff
+                    jac_low_self = bdt * dg_other * diff
+                    jac_low_other = bdt * dg_self * diff
+                    if i == n_target - 1:
+                        # The flux splits as the half cells' conductances: share a / (a + b)
+                        # into the HE; d(share)/dT_i = -b G^2 a k_i' / k_i.
+                        share = a_half * g_face
+                        q_target = bdt * (1.0 - share) * q
+                        q_he = bdt * share * q
+                        d_share = -bdt * q * b_half * g_face * g_face * a_half * tdk / tk
+                        d += d_share
+                elif i < n - 1:
                     g_up = bdt * face_conductance[i]
                     flow_out = g_up * (temp_new[i + 1] - temp_new[i])  # into i from i+1
                     r -= flow_out
@@ -891,6 +993,8 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                         d += robin
                     else:
                         r -= q_he
+                        if tdep:
+                            lower -= d_share
                 if reactive and i >= n_target and temp_new[i] >= t_cold:
                     j = i - n_target
                     inv_t = 1.0 / temp_new[i]
@@ -916,7 +1020,7 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
                         if e > err:
                             err = e
                 # Forward sweep (the melting cells' enthalpies make the off-diagonals unequal).
-                upper = width[i] * dh_dup - g_up
+                upper = width[i] * dh_dup - g_up + up_extra
                 inv = 1.0 / (d - lower * cp_prev)
                 cp_prev = upper * inv
                 dp_prev = (-r - lower * dp_prev) * inv
@@ -1010,8 +1114,12 @@ def simulate_core(width, rho_c, face_conductance, n, n_target, q_share_he,
             if exact_target:
                 record_tb[steps - 1] = temp[0] + g_eff * (drive - temp[0]) / g_h
             else:
-                record_tb[steps - 1] = ((q + g_t * temp[n_target - 1] + g_h * temp[n_target])
-                                        / (g_t + g_h))
+                g_rec = g_t
+                if tdep:
+                    tk, _, _, _ = target_properties(temp[n_target - 1], target_table, n_table)
+                    g_rec = 2.0 * tk / width[n_target - 1]
+                record_tb[steps - 1] = ((q + g_rec * temp[n_target - 1] + g_h * temp[n_target])
+                                        / (g_rec + g_h))
         if t_max > info[INFO_T_MAX]:
             info[INFO_T_MAX] = t_max
         if y_max > info[INFO_Y_MAX]:

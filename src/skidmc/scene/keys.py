@@ -35,6 +35,7 @@ __all__ = [
     "INFINITE_OK",
     "INPUT_KEYS",
     "LAYERS_KEY",
+    "TABLE_KEY",
     "NUMERIC_KEYS",
     "PARTNERS",
     "SCENE_KEYS",
@@ -234,6 +235,14 @@ INPUT_KEYS: tuple[InputKey, ...] = (
 #: deeper layer, the last without a thickness (semi-infinite), separated by '|'; empty for a
 #: homogeneous target (docs/targets.md). The top layer's properties are the target.* keys.
 LAYERS_KEY = "target.layers"
+
+#: The scene attribute (like :data:`LAYERS_KEY`, not an input key) that holds a homogeneous
+#: target's temperature table, set with a registry material that has one (``target =
+#: "fused-quartz"``) or as canonical SI text ``"T_ref | T k c | T k c | ..."`` (K, W/(m K),
+#: J/(kg K)); empty for constant properties. It gives the shape of k(T) and c(T): the model
+#: scales it so that its values at T_ref are the scene's target.conductivity and
+#: target.heat_capacity (docs/targets.md, "Temperature-dependent properties").
+TABLE_KEY = "target.table"
 
 #: Keys that may hold +inf (every other numeric key must be finite).
 INFINITE_OK: frozenset[str] = frozenset({"target.hardness"})

@@ -59,6 +59,10 @@ __all__ = [
     "MATERIALS",
     "PROPERTY_TABLES",
     "PropertyTable",
+    "TABLE_REFERENCE_TEMPERATURE",
+    "format_table",
+    "parse_table",
+    "table_text",
     "STACKS",
     "STACK_SEPARATOR",
     "Stack",
@@ -200,6 +204,16 @@ _ENTRIES: tuple[Material, ...] = (
         "engineering alumina grades from about 85 to 99.5 % span 14-30 W/(m K) and "
         "870-940 J/(kg K) near room temperature (same compilation)."),
     Material(
+        "alumina-85", "85 % alumina (IEC 60672-3 C-780, 80-86 % alumina; the report's grade)",
+        "3.40 g/cm^3", "765 J/(kg K)", "15 W/(m K)",
+        "k: ASTM D2442 / IEC 60672-3 85 % grades, 14-16 W/(m K) at room temperature, as "
+        "compiled in Shackelford & Doremus (eds.), Ceramic and Glass Materials (Springer, 2008); "
+        f"density: {_REPORT}, Table VI (the Coors grade); c: {_INCROPERA}, Table A.2 "
+        "(aluminum oxide, 300 K)",
+        "k 14-16 W/(m K) between makers; with temperature it takes dense alumina's fall "
+        "(Incropera Table A.2, scaled), an upper bound on the fall: the grade's glassy phase "
+        "conducts better when hot (no table of the grade found)"),
+    Material(
         "alumina-85-report", "the report's 85 % alumina (Coors; 15 % silica, magnesia, calcia)",
         "3.40 g/cm^3", "0.18 cal/g/K", "2.1e-2 cal/s/cm/K",
         f"{_REPORT}, Table VI (aluminum oxide) and Sec. III (grade)",
@@ -320,22 +334,89 @@ class PropertyTable:
                 float(np.interp(temperature, tc, cc) / np.interp(reference, tc, cc)))
 
 
+_ALUMINA_TABLE = PropertyTable(
+    (100.0, 200.0, 300.0, 400.0, 600.0, 800.0, 1000.0, 1200.0, 1500.0, 2000.0),
+    (133.0, 55.0, 36.0, 26.4, 15.8, 10.4, 7.85, 6.55, 5.66, 6.00),
+    (None, None, 765.0, 940.0, 1110.0, 1180.0, 1225.0, None, None, None),
+    f"{_INCROPERA}, Table A.2 (aluminum oxide, polycrystalline)")
+
 #: Temperature tables of the registry's materials that have one (Incropera Table A.2; the
-#: 300 K column is the entry's constant value). Used to measure how far the interface's rise
-#: moves a target's properties (scripts/temperature_dependence.py); the model's targets keep
-#: constant properties.
+#: 300 K column is the entry's constant value). A target named by one of these materials takes
+#: k(T) and c(T) from it where its scene needs them (``target.table``; docs/targets.md,
+#: "Temperature-dependent properties"): the table sets the *shape*, k(T) = k_scene k_tab(T) /
+#: k_tab(300 K) and likewise c, so that a scene's (or a study's sampled) ``target.conductivity``
+#: and ``target.heat_capacity`` stay the values at 300 K. ``alumina-85`` takes dense alumina's
+#: shape (no table of the 85 % grade was found; its glassy phase flattens the fall, so this is
+#: the steepest reading).
 PROPERTY_TABLES: Mapping[str, PropertyTable] = {
-    "alumina-99.5": PropertyTable(
-        (100.0, 200.0, 300.0, 400.0, 600.0, 800.0, 1000.0, 1200.0, 1500.0, 2000.0),
-        (133.0, 55.0, 36.0, 26.4, 15.8, 10.4, 7.85, 6.55, 5.66, 6.00),
-        (None, None, 765.0, 940.0, 1110.0, 1180.0, 1225.0, None, None, None),
-        f"{_INCROPERA}, Table A.2 (aluminum oxide, polycrystalline)"),
+    "alumina-99.5": _ALUMINA_TABLE,
+    "alumina-85": _ALUMINA_TABLE,
     "fused-quartz": PropertyTable(
         (100.0, 200.0, 300.0, 400.0, 600.0, 800.0, 1000.0, 1200.0),
         (0.69, 1.14, 1.38, 1.51, 1.75, 2.17, 2.87, 4.00),
         (None, None, 745.0, 905.0, 1040.0, 1105.0, 1155.0, 1195.0),
         f"{_INCROPERA}, Table A.2 (silicon dioxide, polycrystalline (fused silica))"),
 }
+
+#: The temperature [K] at which a table's values are the registry entry's constants (and a
+#: scene's target.conductivity / target.heat_capacity apply): Incropera's 300 K column.
+TABLE_REFERENCE_TEMPERATURE = 300.0
+
+
+def format_table(reference: float, rows) -> str:
+    """The canonical ``target.table`` text (SI, exact float reprs): ``"T_ref | T k c | T k c |
+    ..."`` with T [K], k [W/(m K)], c [J/(kg K)], T increasing."""
+    return " | ".join([repr(float(reference))]
+                      + [" ".join(repr(float(x)) for x in row) for row in rows])
+
+
+def parse_table(text: str) -> tuple[float, tuple[tuple[float, float, float], ...]]:
+    """``target.table`` -> (T_ref [K], rows (T [K], k [W/(m K)], c [J/(kg K)])).
+
+    Raises
+    ------
+    SceneError
+        Not the canonical form (:func:`format_table`), fewer than two rows, temperatures not
+        increasing, a value not finite and positive, or T_ref outside the table.
+    """
+    key = "target.table"
+    parts = [p.strip() for p in text.split("|")]
+    try:
+        reference = float(parts[0])
+        rows = tuple(tuple(float(x) for x in p.split()) for p in parts[1:])
+    except ValueError:
+        raise SceneError(key, text, "expected 'T_ref | T k c | T k c | ...' in SI units (K, "
+                         "W/(m K), J/(kg K)); name a material with a table instead, e.g. "
+                         "target = \"fused-quartz\"") from None
+    if len(rows) < 2 or any(len(r) != 3 for r in rows):
+        raise SceneError(key, text, "a table needs at least two rows of three numbers "
+                         "(T [K], k [W/(m K)], c [J/(kg K)])")
+    values = [reference, *(v for r in rows for v in r)]
+    if not all(math.isfinite(v) and v > 0.0 for v in values):
+        raise SceneError(key, text, "every value must be finite and > 0")
+    temps = [r[0] for r in rows]
+    if any(b <= a for a, b in zip(temps, temps[1:])):
+        raise SceneError(key, text, "the temperatures must increase")
+    if not temps[0] <= reference <= temps[-1]:
+        raise SceneError(key, text, f"the reference temperature {reference!r} K lies outside "
+                         f"the table ({temps[0]!r}-{temps[-1]!r} K)")
+    return reference, rows
+
+
+def table_text(name: str) -> str:
+    """The canonical ``target.table`` of registry material `name` (:data:`PROPERTY_TABLES`),
+    empty where it has none: every temperature the source gives k or c at, each property
+    interpolated linearly where the source gives the other only, and held at its first or last
+    value beyond the temperatures where the source gives it (so the piecewise-linear function
+    of the rows is each property's own interpolant)."""
+    table = PROPERTY_TABLES.get(name)
+    if table is None:
+        return ""
+    t = np.asarray(table.temperature, dtype=float)
+    have_c = [i for i, c in enumerate(table.heat_capacity) if c is not None]
+    c = np.interp(t, t[have_c], [table.heat_capacity[i] for i in have_c])
+    rows = zip(t.tolist(), [float(k) for k in table.conductivity], c.tolist())
+    return format_table(TABLE_REFERENCE_TEMPERATURE, rows)
 
 
 def list_materials() -> list[str]:
@@ -505,7 +586,9 @@ def is_stack(name: object) -> bool:
 
 def target_values(name: object) -> dict[str, str | float]:
     """The scene values ``target = name`` sets: the four target keys of the (top) material, as
-    unit strings, and ``target.layers`` (canonical text; empty for one material).
+    unit strings, ``target.layers`` (canonical text; empty for one material) and
+    ``target.table`` (a material's temperature table, :func:`table_text`; empty for a stack,
+    whose layers keep constant properties).
 
     Parameters
     ----------
@@ -522,7 +605,8 @@ def target_values(name: object) -> dict[str, str | float]:
         Unknown names, a missing or extra thickness (key ``target``).
     """
     if not is_stack(name):
-        return {**get_material(name).values, "target.layers": ""}
+        return {**get_material(name).values, "target.layers": "",
+                "target.table": table_text(name)}
     text = STACKS[name].layers if name in STACKS else name.strip()
     parts = _SPLIT.split(text)
     layers = [_layer_values(p, i == len(parts) - 1) for i, p in enumerate(parts)]
@@ -531,5 +615,6 @@ def target_values(name: object) -> dict[str, str | float]:
         rho, c, k = (to_si(key, values[key], SI_UNITS[key]) for key in TARGET_KEYS[:3])
         deeper.append((rho, c, k, thickness))
     top_values, top_thickness = layers[0]
-    return {**top_values, "target.layers": format_layers(top_thickness, deeper)}
+    return {**top_values, "target.layers": format_layers(top_thickness, deeper),
+            "target.table": ""}
 

@@ -39,6 +39,7 @@ from skidmc.scene.keys import (
     PARTNERS,
     SCENE_KEYS,
     SI_UNITS,
+    TABLE_KEY,
     between_keys_ok,
     bound_reason,
     first_broken_between,
@@ -46,7 +47,14 @@ from skidmc.scene.keys import (
     implausible_reason,
     in_bounds,
 )
-from skidmc.scene.materials import MATERIAL_KEY, format_layers, parse_layers, target_values
+from skidmc.scene.materials import (
+    MATERIAL_KEY,
+    format_layers,
+    format_table,
+    parse_layers,
+    parse_table,
+    target_values,
+)
 from skidmc.scene.presets import PRESETS
 from skidmc.scene.units import read_si
 
@@ -68,10 +76,12 @@ __all__ = [
 # keys in overrides, so that ``scene.replace(he_density=1900.0)`` works.
 _FIELD_OF_KEY: dict[str, str] = FIELDS
 _LAYERS_FIELD = LAYERS_KEY.replace(".", "_")
+_TABLE_FIELD = TABLE_KEY.replace(".", "_")
 _KEY_OF_NAME: dict[str, str] = {
     **{field: key for key, field in _FIELD_OF_KEY.items()},
     **{key: key for key in SCENE_KEYS},
     _LAYERS_FIELD: LAYERS_KEY, LAYERS_KEY: LAYERS_KEY,
+    _TABLE_FIELD: TABLE_KEY, TABLE_KEY: TABLE_KEY,
 }
 _NUMERIC = frozenset(NUMERIC_KEYS)
 _ATTRIBUTES_MARK = "<attributes from skidmc.scene.keys.INPUT_KEYS>"
@@ -89,6 +99,9 @@ def _fields_from_input_keys(cls: type) -> type:
     # Not an input key: a layered target's deeper layers (skidmc.scene.keys.LAYERS_KEY).
     cls.__annotations__[_LAYERS_FIELD] = "str"
     cls.target_layers = ""  # a homogeneous target
+    # Not an input key either: a target's temperature table (skidmc.scene.keys.TABLE_KEY).
+    cls.__annotations__[_TABLE_FIELD] = "str"
+    cls.target_table = ""  # constant properties
     lines = []
     for k in INPUT_KEYS:
         unit = f" [{k.si_unit}]" if k.numeric else ""
@@ -98,7 +111,10 @@ def _fields_from_input_keys(cls: type) -> type:
         lines += [f"    {k.field} : {k.type_name}", f"        {text}{unit}."]
     lines += [f"    {_LAYERS_FIELD} : str",
               "        A layered target's layers beneath the top (canonical SI text, "
-              "skidmc.scene.keys.LAYERS_KEY); empty for a homogeneous target."]
+              "skidmc.scene.keys.LAYERS_KEY); empty for a homogeneous target.",
+              f"    {_TABLE_FIELD} : str",
+              "        A target's temperature table (canonical SI text, "
+              "skidmc.scene.keys.TABLE_KEY); empty for constant properties."]
     if cls.__doc__:  # None under python -OO
         cls.__doc__ = cls.__doc__.replace("    " + _ATTRIBUTES_MARK, "\n".join(lines))
     return cls
@@ -146,6 +162,11 @@ class Scene:
                              "a homogeneous target)")
         if self.target_layers:
             parse_layers(self.target_layers)
+        if not isinstance(self.target_table, str):
+            raise SceneError(TABLE_KEY, self.target_table, "expected a string (empty for "
+                             "constant properties)")
+        if self.target_table:
+            parse_table(self.target_table)
         if self.configuration not in CONFIGURATIONS:
             raise SceneError(
                 "configuration", self.configuration,
@@ -216,7 +237,8 @@ def _base_values(preset: str | Scene | None) -> dict:
     if preset is None:
         return {}
     if isinstance(preset, Scene):
-        return {**preset.as_dict(), LAYERS_KEY: preset.target_layers}
+        return {**preset.as_dict(), LAYERS_KEY: preset.target_layers,
+                TABLE_KEY: preset.target_table}
     if isinstance(preset, str):
         return get_preset(preset).as_dict()
     raise SceneError("preset", preset, "expected a preset name or a Scene")
@@ -233,6 +255,11 @@ def _convert(key: str, value: object) -> tuple[float | str, bool]:
             raise SceneError(key, value, "expected a string (set it with a stack: target = "
                              "\"gold 3 mil / copper 7 mil / aluminium-2024\")")
         return (format_layers(*parse_layers(value)) if value.strip() else ""), False
+    if key == TABLE_KEY:
+        if not isinstance(value, str):
+            raise SceneError(key, value, "expected a string (set it with a material that has "
+                             "a table: target = \"fused-quartz\")")
+        return (format_table(*parse_table(value)) if value.strip() else ""), False
     return read_si(key, value, SI_UNITS[key])
 
 
@@ -304,7 +331,7 @@ def make_scene(
             values[key] = _convert(key, text)[0]
     bare = []
     for key, raw in given.items():
-        if key not in SI_UNITS and key != LAYERS_KEY:
+        if key not in SI_UNITS and key not in (LAYERS_KEY, TABLE_KEY):
             raise UnknownKeyError(key, raw, [*SCENE_KEYS, MATERIAL_KEY])
         values[key], is_bare = _convert(key, raw)
         if is_bare:
@@ -320,6 +347,7 @@ def make_scene(
     # rigid target.
     values.setdefault("target.hardness", DEFAULT_TARGET_HARDNESS)
     values.setdefault(LAYERS_KEY, "")
+    values.setdefault(TABLE_KEY, "")
     missing = [key for key in SCENE_KEYS if key not in values]
     if missing:
         raise MissingKeyError(
@@ -328,7 +356,7 @@ def make_scene(
         )
     try:
         scene = Scene(**{_FIELD_OF_KEY[key]: values[key] for key in SCENE_KEYS},
-                      target_layers=values[LAYERS_KEY])
+                      target_layers=values[LAYERS_KEY], target_table=values[TABLE_KEY])
     except SceneError as err:
         # Name the value as the user wrote it (not its SI conversion), and for a check between two
         # keys name the one the user gave.

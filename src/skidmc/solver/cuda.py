@@ -285,10 +285,12 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     censor_names = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
     results = []
     for scene, o in zip(scenes, out):
-        # The device's target is homogeneous: a stack whose heat reaches below its top layer
-        # goes to the fallback (the CPU search meshes its layers).
-        layered = bool(scene.target_layers) and "layered_target" in build_model(
-            scene, meshes=False, melting=melting, **extra).terms
+        # The device's target is homogeneous with constant properties (a row of floats): a
+        # stack whose heat reaches below its top layer, or a target whose k and c follow its
+        # temperature table, goes to the fallback (the CPU search meshes them).
+        layered = bool(scene.target_layers or scene.target_table) and bool(
+            {"layered_target", "temperature_target"} & set(build_model(
+                scene, meshes=False, melting=melting, rtol=rtol, **extra).terms))
         if layered or o[device.OUT_STATUS] != device.STATUS_OK:
             try:
                 results.append(fallback(scene, rtol=rtol, h_min=h_min, h_max=h_max,
@@ -296,7 +298,7 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
             except Exception as exc:  # noqa: BLE001 - the caller records it per sample
                 results.append(exc)
             continue
-        model = build_model(scene, meshes=False, melting=melting, **extra)
+        model = build_model(scene, meshes=False, melting=melting, rtol=rtol, **extra)
         height = float(o[device.OUT_HEIGHT])
         censored = censor_names[int(o[device.OUT_CENSOR])]
         results.append(HeightResult(

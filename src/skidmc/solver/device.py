@@ -26,7 +26,10 @@ Where it differs from the CPU search, and why
   melting width's bias there with an extra simulation and may narrow the width), scenes whose
   pair would have to move above :data:`DEVICE_MAX_LEVEL` (the thread's fixed-size arrays), and
   any search that fails (integration failure, no bracket within the evaluation cap): the CPU
-  search then gives the result, or the failure with its reason. The batch front end
+  search then gives the result, or the failure with its reason. Scenes the row of floats
+  cannot carry go there too, before any device work is trusted: layered targets whose heat
+  reaches below the top layer, and targets whose properties follow a temperature table
+  ("temperature_target"; the thread's target has constant properties). The batch front end
   (:func:`skidmc.solver.cuda.cuda_critical_heights`) does this; no sample is lost.
 """
 
@@ -157,7 +160,8 @@ def _margin(x, row, sc, n_cells, share, tol_temperature, melt_width, work, info)
                   work[0], 0, work[0], work[1], work[2], work[3], work[4], work[5], work[6],
                   work[7], work[8], work[9], work[10], work[11], work[12], work[13], info,
                   0.0, 0.0, work[0], work[0], work[0], work[0], 0.0,  # the meshed target
-                  work[0], 0)  # no linear prefix
+                  work[0], 0,  # no linear prefix
+                  work[0], 0)  # constant target properties (tables go to the CPU search)
     horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
     if info[INFO_FAILED] > 0.0 or (info[INFO_STEPS] + info[INFO_REJECTED] >= MAX_STEPS
                                    and not info[INFO_EVENT] > 0.0):

@@ -173,10 +173,17 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
     if not (0.0 < h_min < h_max):
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
     # Terms and validity flags (scene and height) as the full tier infers them, without meshes.
-    model = build_model(scene, melting=melting, meshes=False)
+    # A tabled target's properties are held constant where that fits the tier's own stated
+    # error (its error budget), else refused: the tier's target has constant properties.
+    model = build_model(scene, melting=melting, meshes=False, rtol=ERROR_ESTIMATE)
     if "layered_target" in model.terms:
         raise SceneError("tier", "fast", "the fast tier's target is homogeneous, and this "
                          "stack's heat reaches below its top layer (use the full tier)")
+    if "temperature_target" in model.terms:
+        raise SceneError("tier", "fast", "the fast tier's target has constant properties, and "
+                         "this target's k and c change over the interface's rise by more "
+                         f"than the tier's error ({ERROR_ESTIMATE:g}; use the full tier, "
+                         "or a material without a table, e.g. target.table = \"\")")
     error = fast_error_bound(model.flags)
     refused = [f for f in REFUSED_FLAGS if f in model.flags]
     if strict and refused:

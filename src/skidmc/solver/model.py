@@ -34,7 +34,7 @@ from skidmc.physics.meshes import (
     reaction_zone,
 )
 from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION, runaway_temperature
-from skidmc.scene.materials import parse_layers
+from skidmc.scene.materials import parse_layers, parse_table
 
 __all__ = [
     "BASE_RESOLUTION",
@@ -46,6 +46,7 @@ __all__ = [
     "LONG_SLIDE_DIAMETERS",
     "MELT_WIDTH_BIAS_PER_K",
     "MELT_WIDTH_LEVEL0",
+    "PROPERTY_BUDGET_FRACTION",
     "Resolution",
     "SELF_HEATING_TIME",
     "SkidModel",
@@ -60,6 +61,10 @@ __all__ = [
     "melt_width_floor",
     "resolution_for_level",
     "target_layers",
+    "target_property_change",
+    "target_property_table",
+    "target_temperature_range",
+    "constant_property_scene",
 ]
 
 #: Integration horizon, in exit times. Beyond the exit the flux is extended (see
@@ -93,6 +98,19 @@ EARLY_STOP_FRACTION = 0.25
 #: 1/k for a weakly exothermic HE) within this time [s]: a billet with these kinetics could not be
 #: held at T0, and a height, if one is found, is not a friction result.
 SELF_HEATING_TIME = 3600.0
+
+#: A target with a temperature table (``target.table``) keeps constant properties (those of its
+#: scene, the table's values at its reference temperature) where the bound on their effect on
+#: the critical height, |ln k(T) / k| + |ln c(T) / c| at worst over T0 to the interface's highest
+#: temperature (:func:`target_property_change`), is within this fraction of the search's rtol;
+#: otherwise it takes k(T), c(T) in every target cell ("temperature_target"). The bound: the
+#: interface's rise under a flux q is ~ q sqrt(t) / (e_HE + e_t) (report Eq. 16's split), and
+#: q ~ sqrt(H), so at a fixed ignition temperature H ~ (e_HE + e_t)^2 and |d ln H| <= 2 |d ln e_t|
+#: = |d ln k| + |d ln c|. It overstates the measured effect 1.5-3.5 fold (constant
+#: properties at the interface's mean temperature moved ln H_c by 0.31-0.37 where the bound
+#: gives 0.54-1.08: results/validation/temperature_dependence.md). A tenth of rtol leaves the
+#: rest of the budget to the discretisation, melting width and root (skidmc.solver.plan).
+PROPERTY_BUDGET_FRACTION = 0.1
 
 #: "hot_ignition": the kinetics need the HE above this temperature [K] to run away within the
 #: heating time (the temperature at which the adiabatic induction time equals t_exit, a lower
@@ -135,6 +153,12 @@ FLAG_MEANINGS: dict[str, str] = {
                       "(docs/targets.md)",
     "top_layer_only": "a layered target whose top layer is thicker than the heat reaches: "
                       "the homogeneous top layer is used (docs/targets.md)",
+    "temperature_target": "the target's k and c change with temperature by more than the "
+                          "error budget over the interface's rise: they follow the "
+                          "material's table in every target cell (docs/targets.md)",
+    "constant_target": "the target has a temperature table, but its rise changes k and c "
+                       "by less than the error budget: constant properties at the table's "
+                       "reference temperature (docs/targets.md)",
     "yielding_target": "the target yields below the billet's flow stress: the contact "
                        "pressure is the target's hardness (longer, gentler contact, less "
                        "frictional heat; docs/model.md, targets softer than the billet)",
@@ -320,6 +344,10 @@ class SkidModel:
     # sqrt(k rho c) [W s^0.5 / (m^2 K)] and the HE's conductivity k [W/(m K)]; 0 when meshed.
     target_effusivity: float = 0.0
     he_conductivity: float = 0.0
+    # A temperature-dependent target ("temperature_target"): the kernel's table
+    # (skidmc.physics.thermal.target_properties: T [K], k [W/(m K)], rho c [J/(m^3 K)],
+    # H [J/m^3] at each node); empty with constant properties.
+    target_table: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def flux_amplitude(self, height):
         """q0 = mu sigma V0 [W/m^2] for drop height ``height`` [m] (Eqs. 1, 10)."""
@@ -347,7 +375,7 @@ class SkidModel:
 
 def build_model(scene, resolution=None, *, level=0.0, melting=True,
                 runaway_fraction=DEFAULT_RUNAWAY_FRACTION, horizon=HORIZON_EXIT_TIMES,
-                meshes=True, melt_width=None, melt_spread=0.0, target="mesh"):
+                meshes=True, melt_width=None, melt_spread=0.0, target="mesh", rtol=1e-3):
     """Infer the model a scene needs and build its meshes.
 
     Parameters
@@ -380,6 +408,10 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         interface (:mod:`skidmc.physics.thermal`); only the HE is meshed. The target's mesh
         carries most of a level's spatial error (docs/model.md, "The target as an exact
         semi-infinite solid"); the search's error model is not yet calibrated for it.
+    rtol : float
+        The search's relative tolerance on the critical height [1]: a target with a
+        temperature table takes k(T), c(T) where holding them constant could move the height by
+        more than :data:`PROPERTY_BUDGET_FRACTION` of it.
 
     Returns
     -------
@@ -462,12 +494,36 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
                                  "layer: a layered target needs the meshed target "
                                  "(target='mesh'; the default search chooses it)")
 
+    table = None
+    if getattr(scene, "target_table", ""):
+        if getattr(scene, "target_layers", ""):
+            raise SceneError("target.table", scene.target_table, "a temperature table applies "
+                             "to a homogeneous target; a stack's layers keep constant "
+                             "properties")
+        t_low, t_high = target_temperature_range(scene.initial_temperature, t_run)
+        change = target_property_change(scene, t_low, t_high)
+        if change > PROPERTY_BUDGET_FRACTION * rtol:
+            terms.append("temperature_target")
+            flags.append("temperature_target")
+            table = target_property_table(scene)
+            if target == "exact":
+                raise SceneError("target", target, "a temperature-dependent target needs the "
+                                 "meshed target (target='mesh'; the default search chooses "
+                                 "it)")
+        else:
+            terms.append("constant_target")
+            flags.append("constant_target")
+
+    kernel_table = np.zeros(0)
     if meshes:
         n_cells = resolution.cells_per_medium
         width, rho_c, face, q_share_he = _meshes(scene, resolution, t_exit, t_end, prefactor,
                                                  t_a)
         if layers is not None:
             q_share_he = _layer_meshes(scene, layers, t_end, n_cells, width, rho_c, face)
+        if table is not None:
+            q_share_he, kernel_table = _table_meshes(scene, table, t_high, t_end, n_cells,
+                                                     width, rho_c, face)
     else:
         # No cells: the fields as the mesh arithmetic would leave them, without running it
         # (the fast tier builds a mesh-less model for every result).
@@ -499,6 +555,7 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         indent_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * math.cos(phi) / omega,
         slide_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * mean_shape * t_exit,
         target_effusivity=target_effusivity, he_conductivity=he_conductivity,
+        target_table=kernel_table,
     )
 
 
@@ -563,6 +620,106 @@ def _layer_meshes(scene, layers, t_end, n_cells, width, rho_c, face):
     face[:n_cells] = 1.0 / (half[:n_cells] + half[1:n_cells + 1])
     g_tg, g_he = 1.0 / half[n_cells - 1], 1.0 / half[n_cells]
     return float(g_he / (g_tg + g_he))
+
+
+def target_property_table(scene):
+    """A scene's temperature table as the model uses it, or None (no ``target.table``).
+
+    The table gives the shape: k(T) = k k_tab(T) / k_tab(T_ref) and c(T) = c c_tab(T) /
+    c_tab(T_ref), with k, c the scene's target.conductivity and target.heat_capacity, so that a
+    registry material's table is used as printed and a scene (or a study's draw) that sets k or
+    c at T_ref scales the whole curve. The density stays constant (thermal expansion moves it by
+    ~1-2 % to 800 K).
+
+    Returns
+    -------
+    (temperature, conductivity, heat_capacity) : tuple of ndarray, or None
+        [K], [W/(m K)], [J/(kg K)] at the table's nodes.
+    """
+    text = getattr(scene, "target_table", "")
+    if not text:
+        return None
+    reference, rows = parse_table(text)
+    t, k, c = (np.array(col, dtype=float) for col in zip(*rows))
+    k_ref, c_ref = np.interp(reference, t, k), np.interp(reference, t, c)
+    return (t, k * (scene.target_conductivity / k_ref),
+            c * (scene.target_heat_capacity / c_ref))
+
+
+def target_temperature_range(initial_temperature, runaway_temperature):
+    """(T0, the interface's highest temperature before an event) [K], the range over which a
+    tabled target's properties move: an HE cell that passes the runaway temperature ends the run
+    with an event, and the HE's surface cell is its hottest and lies at the interface, so the
+    runaway temperature bounds the interface up to the event (the interface peaked at 717-759 K
+    at the critical height of the report's ceramic scenes; results/validation/
+    temperature_dependence.md). Without a runaway rule (inert HE, rule off): 2000 K."""
+    high = runaway_temperature if math.isfinite(runaway_temperature) else 2000.0
+    return initial_temperature, max(high, initial_temperature)
+
+
+def target_property_change(scene, t_low, t_high):
+    """Bound on |ln H(k(T), c(T)) - ln H(k, c)| [1] over ``t_low``..``t_high`` [K]:
+    max |ln k(T) / k| + max |ln c(T) / c| (:data:`PROPERTY_BUDGET_FRACTION`), with k, c the
+    scene's constant values; 0 without a table. Both are piecewise linear in T, so the maxima lie
+    at the nodes inside the range or at its ends."""
+    table = target_property_table(scene)
+    if table is None:
+        return 0.0
+    t, k, c = table
+    inside = t[(t > t_low) & (t < t_high)]
+    points = np.concatenate([[t_low, t_high], inside])
+    k_at, c_at = np.interp(points, t, k), np.interp(points, t, c)
+    return float(np.max(np.abs(np.log(k_at / scene.target_conductivity)))
+                 + np.max(np.abs(np.log(c_at / scene.target_heat_capacity))))
+
+
+def constant_property_scene(scene, temperature):
+    """The scene with constant target properties: k and c of its table at ``temperature`` [K]
+    and no table (itself without one). The fast tier's guess for a temperature-dependent target,
+    and the comparison in scripts/temperature_dependent_targets.py."""
+    table = target_property_table(scene)
+    if table is None:
+        return scene
+    t, k, c = table
+    return scene.replace({"target.conductivity": float(np.interp(temperature, t, k)),
+                          "target.heat_capacity": float(np.interp(temperature, t, c)),
+                          "target.table": ""}, check_plausible=False)
+
+
+def _table_meshes(scene, table, t_high, t_end, n_cells, width, rho_c, face):
+    """Replace the target's cells of the homogeneous meshes by a temperature-dependent
+    target's, and build the kernel's table (:func:`skidmc.physics.thermal.target_properties`).
+
+    The mesh is the homogeneous one's geometric mesh, its first cell sized by the smallest
+    diffusivity k / (rho c) over T0..``t_high`` [K] (the interface's, where the gradient is
+    steepest: as fill_meshes scales it, sqrt(alpha_target / alpha_HE) times the first HE cell)
+    and its depth by the largest (DEPTH_DIFFUSION_LENGTHS diffusion lengths over ``t_end`` [s]);
+    for a table constant in T it is the homogeneous mesh. The arrays' target cells and faces
+    are filled at T0 (the kernel evaluates them per step). Returns (share of the interface flux
+    into the HE at T0 [1], the kernel's table).
+    """
+    t, k, c = table
+    rho_cv = scene.target_density * c
+    points = np.concatenate([[scene.initial_temperature, t_high],
+                             t[(t > scene.initial_temperature) & (t < t_high)]])
+    alpha = np.interp(points, t, k) / np.interp(points, t, rho_cv)
+    alpha_he = scene.he_conductivity / (scene.he_density * scene.he_heat_capacity)
+    h0_he = width[n_cells]
+    h0 = h0_he * math.sqrt(float(alpha.min()) / alpha_he)
+    r = geometric_ratio(h0, DEPTH_DIFFUSION_LENGTHS * math.sqrt(float(alpha.max()) * t_end),
+                        n_cells)
+    for i in range(n_cells):
+        width[n_cells - 1 - i] = h0 * r ** float(i)
+    k0 = float(np.interp(scene.initial_temperature, t, k))
+    rho_c[:n_cells] = float(np.interp(scene.initial_temperature, t, rho_cv))
+    kk = np.concatenate([np.full(n_cells, k0), np.full(n_cells, scene.he_conductivity)])
+    half = width / (2.0 * kk)
+    face[:n_cells] = 1.0 / (half[:n_cells] + half[1:n_cells + 1])
+    g_tg, g_he = 1.0 / half[n_cells - 1], 1.0 / half[n_cells]
+    # Enthalpy at the nodes: the exact integral of the piecewise-linear rho c(T).
+    enthalpy = np.concatenate([[0.0], np.cumsum(0.5 * (rho_cv[1:] + rho_cv[:-1]) * np.diff(t))])
+    kernel_table = np.ascontiguousarray(np.concatenate([t, k, rho_cv, enthalpy]))
+    return float(g_he / (g_tg + g_he)), kernel_table
 
 
 def _ignition_diagnostics(prefactor, activation_temperature, adiabatic_rise,

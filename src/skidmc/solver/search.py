@@ -31,7 +31,13 @@ from skidmc.physics.mechanics import (
 )
 from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.scene.scenes import Scene
-from skidmc.solver.model import build_model, elastic_target_reason, melt_width_floor
+from skidmc.solver.model import (
+    build_model,
+    constant_property_scene,
+    elastic_target_reason,
+    melt_width_floor,
+    target_temperature_range,
+)
 from skidmc.solver.plan import (
     EXACT_FINE_SHIFT,
     EXACT_FINE_SHIFT_SPREAD,
@@ -278,9 +284,11 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
     if melt_spread is None:
         melt_spread = MELT_SPREAD if adaptive else 0.0
     if target is None:
-        # The exact target is homogeneous: a stack whose heat reaches below its top layer is
+        # The exact target is homogeneous with constant properties: a stack whose heat
+        # reaches below its top layer, or a target whose properties follow its temperature, is
         # meshed (docs/targets.md).
-        layered = "layered_target" in build_model(scene, meshes=False).terms
+        terms = build_model(scene, meshes=False, rtol=rtol).terms
+        layered = "layered_target" in terms or "temperature_target" in terms
         target = "exact" if adaptive and not layered else "mesh"
     elif target not in TARGETS:
         raise SceneError("target", target, f"expected one of {', '.join(TARGETS)}")
@@ -540,7 +548,8 @@ def _melt_width_bias(scene, coarse, common):
               else {"runaway_fraction": common["runaway_fraction"]})
     model = build_model(scene, level=coarse.level, melting=common["melting"],
                         melt_width=2.0 * common["melt_width"],
-                        melt_spread=common["melt_spread"], target=common["target"], **kwargs)
+                        melt_spread=common["melt_spread"], target=common["target"],
+                        rtol=coarse.rtol, **kwargs)
     m_wide = simulate(model, height).margin
     if not math.isfinite(m_wide):
         return None, 1
@@ -609,7 +618,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     if own_model:
         kwargs = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
         model = build_model(scene, level=level, melting=melting, melt_width=melt_width,
-                            melt_spread=melt_spread, target=target, **kwargs)
+                            melt_spread=melt_spread, target=target, rtol=rtol, **kwargs)
     base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
                 exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
                 error_estimate=(modelled_error(level) + x_tol
@@ -720,6 +729,13 @@ def _fast_guess(scene, h_min, h_max, melting):
     """The fast tier's critical height [m] as a first guess, or None (censored or failed)."""
     from skidmc.solver.fast import fast_critical_height
 
+    if scene.target_table:
+        # The fast tier's target has constant properties: for a guess, those of the table at
+        # the middle of the interface's rise (docs/targets.md).
+        model = build_model(scene, meshes=False, melting=melting)
+        low, high = target_temperature_range(scene.initial_temperature,
+                                             model.runaway_temperature)
+        scene = constant_property_scene(scene, 0.5 * (low + high))
     try:
         res = fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
     except Exception:  # noqa: BLE001 - only a guess: the full search does not need it

@@ -139,7 +139,8 @@ def kernel_arguments(model, height, *, max_steps=MAX_STEPS, flux_override=None,
             model.initial_temperature, model.resolution.tol_temperature, model.dt_initial,
             model.runaway_fraction, max_steps, record_t, record_tb,
             model.target_effusivity, model.he_conductivity,
-            sign_commit_fraction, np.zeros(0) if prefix is None else prefix, prefix_mode)
+            sign_commit_fraction, np.zeros(0) if prefix is None else prefix, prefix_mode,
+            model.target_table, model.target_table.shape[0] // 4)
 
 
 def step_cap(model) -> int:
