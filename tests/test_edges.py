@@ -479,10 +479,10 @@ rtol = 1e-2
 def test_an_ensemble_flags_and_counts_samples_outside_the_plausible_range(tmp_path):
     import numpy as np
 
-    from skidmc.workflows.reporting.ensemble import write_report
     from skidmc.ensemble.run import execute_study
     from skidmc.ensemble.storage import open_ensemble
     from skidmc.workflows.ensemble import flag_summary_lines
+    from skidmc.workflows.reporting.ensemble import write_report
 
     (tmp_path / "odd.toml").write_text(IMPLAUSIBLE_STUDY)
     report = execute_study(tmp_path / "odd.toml", tmp_path / "o.h5", workers=1, progress=False)
