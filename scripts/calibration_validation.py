@@ -7,9 +7,10 @@ writes ``calibration_sbc.md`` (and ``calibration_sbc.png``, the rank histograms)
 The forward model is the calibration's own likelihood with surrogates of ln H_c standing in
 for the solver: quadratic least-squares polynomials fitted to the shipped first-series ensemble
 (``results/paper-series1/ensemble.h5``, 4 scenes x 10,000 solver runs; no new solver run), the
-friction factor integrated by the quadrature with fewer nodes than the shipped study (16: SBC
-tests the sampler and the likelihood's code, for which the simulating and the fitting model
-must only agree; the quadrature's own accuracy is measured by doubling in every run). The
+friction factor integrated by the quadrature with fewer nodes than the shipped study (8 by
+default, for speed: SBC tests the sampler and the likelihood's code, for which the simulating
+and the fitting model must only agree; the quadrature's own accuracy is measured by doubling in
+every run of the kind). The
 model has no friction population (SBC needs the prior to be the N(0, 1) the scores are drawn
 from), and the same drop heights as the report's (Tables III, IV, the gold no-gos).
 """
@@ -28,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def sbc_model(nodes: int = 16):
+def sbc_model(nodes: int = 8):
     """The calibration-series1 model (no population) on surrogates fitted to the shipped
     ensemble."""
     import skidmc
@@ -56,16 +57,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--replications", type=int, default=100)
     ap.add_argument("--draws", type=int, default=99, help="posterior draws ranked against")
-    ap.add_argument("--walkers", type=int, default=40)
-    ap.add_argument("--burn", type=int, default=500)
-    ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--walkers", type=int, default=36)
+    ap.add_argument("--burn", type=int, default=300)
+    ap.add_argument("--steps", type=int, default=600)
+    ap.add_argument("--nodes", type=int, default=8, help="quadrature nodes of the friction")
     ap.add_argument("--seed", type=int, default=2018)
     ap.add_argument("--out", default=str(ROOT / "results" / "validation"))
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
-    model = sbc_model()
+    model = sbc_model(args.nodes)
     t0 = time.perf_counter()
     ranks = sbc_ranks(model, args.replications, draws=args.draws, walkers=args.walkers,
                       burn=args.burn, steps=args.steps, seed=args.seed,
@@ -82,11 +84,13 @@ def main(argv=None) -> int:
     lines = ["# Calibration: simulation-based calibration and recovery", "",
              "Written by `python scripts/calibration_validation.py` "
              f"(--replications {args.replications} --draws {args.draws} --walkers "
-             f"{args.walkers} --burn {args.burn} --steps {args.steps} --seed {args.seed}). "
+             f"{args.walkers} --burn {args.burn} --steps {args.steps} --nodes {args.nodes} "
+             f"--seed {args.seed}). "
              "Forward model: the calibration's likelihood with quadratic surrogates of ln H_c "
-             "fitted to the shipped paper-series1 ensemble standing in for the solver, 16 "
-             "quadrature nodes, no friction population (its prior must be the N(0, 1) the "
-             "true scores are drawn from), the report's drop heights (docstring of the script).",
+             "fitted to the shipped paper-series1 ensemble standing in for the solver, "
+             f"{args.nodes} quadrature nodes, no friction population (its prior must be the "
+             "N(0, 1) the true scores are drawn from), the report's drop heights (docstring of "
+             "the script).",
              "", "## Simulation-based calibration (Talts et al. 2018)", "",
              f"{args.replications} replications: scores drawn from the prior, drops simulated, "
              f"the posterior sampled by emcee ({args.walkers} walkers, {args.burn} + "

@@ -539,7 +539,12 @@ def run_emcee(log_prob: Callable[[np.ndarray], np.ndarray], ndim: int, *, walker
 
     rng = np.random.default_rng(seed)
     p0 = rng.standard_normal((walkers, ndim)) if initial is None else np.asarray(initial)
-    sampler = emcee.EnsembleSampler(walkers, ndim, log_prob, vectorize=True)
+    # Differential-evolution moves (80 %) with snooker updates (20 %), emcee's suggestion for
+    # correlated posteriors: on the shipped calibration's 17 parameters their integrated
+    # autocorrelation time was 53 steps (median; 65 largest) against 160 (194) for emcee's
+    # default stretch move, measured over 5000 steps of 48 walkers (docs/calibration.md).
+    moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+    sampler = emcee.EnsembleSampler(walkers, ndim, log_prob, vectorize=True, moves=moves)
     sampler._random = np.random.mtrand.RandomState(seed)  # emcee's own RNG, seeded
     state = p0
     total = burn + steps
