@@ -91,7 +91,6 @@ def _plot_go_curves(idata, curves, summary, out: Path):
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
     from matplotlib.ticker import FormatStrFormatter, NullFormatter
 
     targets = list(curves.target.values)
