@@ -63,17 +63,26 @@ def main(argv=None) -> int:
     ap.add_argument("--nodes", type=int, default=8, help="quadrature nodes of the friction")
     ap.add_argument("--seed", type=int, default=2018)
     ap.add_argument("--out", default=str(ROOT / "results" / "validation"))
+    ap.add_argument("--recovery-only", action="store_true",
+                    help="redo the recovery only, keeping the SBC ranks of the last full run")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
 
     model = sbc_model(args.nodes)
-    t0 = time.perf_counter()
-    ranks = sbc_ranks(model, args.replications, draws=args.draws, walkers=args.walkers,
-                      burn=args.burn, steps=args.steps, seed=args.seed,
-                      progress=lambda r: print(f"SBC replication {r}", file=sys.stderr)
-                      if r % 10 == 0 else None)
-    sbc_minutes = (time.perf_counter() - t0) / 60
+    kept = out / "calibration_sbc.json"
+    if args.recovery_only:  # the SBC ranks of the last full run, with its settings
+        old = json.loads(kept.read_text())
+        ranks, sbc_minutes = np.asarray(old["ranks"]), old["sbc_minutes"]
+        for key, value in old["settings"].items():
+            setattr(args, key, value)
+    else:
+        t0 = time.perf_counter()
+        ranks = sbc_ranks(model, args.replications, draws=args.draws, walkers=args.walkers,
+                          burn=args.burn, steps=args.steps, seed=args.seed,
+                          progress=lambda r: print(f"SBC replication {r}", file=sys.stderr)
+                          if r % 10 == 0 else None)
+        sbc_minutes = (time.perf_counter() - t0) / 60
     test = rank_uniformity(ranks, args.draws, bins=10)
     t0 = time.perf_counter()
     z_true = np.random.default_rng(args.seed + 1).standard_normal(model.ndim)
@@ -107,8 +116,11 @@ def main(argv=None) -> int:
               "", "![rank histograms](calibration_sbc.png)", "",
               "## Recovery", "",
               "Drops simulated at one set of true scores (a prior draw, seed "
-              f"{args.seed + 1}), at the report's heights (1x) and with each drop made ten "
-              f"times (10x); emcee {args.walkers} walkers, {2 * args.burn} + {3 * args.steps} "
+              f"{args.seed + 1}), at the report's heights shifted in ln H to centre on each "
+              "target's true H50 (as an experimenter bracketing it would place them; at the "
+              "report's own heights a prior draw's H50 can lie far from every drop, which then "
+              "says little), as many drops as the report (1x) and each drop made ten times "
+              f"(10x); emcee {args.walkers} walkers, {2 * args.burn} + {3 * args.steps} "
               f"steps. {rec_minutes:.1f} min.", "",
               "| target | true H50 [ft] | 1x: median [ft], sd ln H50, in 95 %? | 10x: median "
               "[ft], sd ln H50, in 95 %? |", "|---|---|---|---|"]
@@ -119,14 +131,26 @@ def main(argv=None) -> int:
                      f", {a['sd']:.3f}, {'yes' if a['inside_95'] else 'NO'} | "
                      f"{np.exp(b['median']) / ft:.3g}, {b['sd']:.3f}, "
                      f"{'yes' if b['inside_95'] else 'NO'} |")
+    misses = {row["repeat"]: [n for n, t in row["targets"].items() if not t["inside_95"]]
+              for row in rec}
+    lines += ["", "Verdict: " + "; ".join(
+        f"{k}x: the truth outside the 95 % interval for {', '.join(v) if v else 'no target'}"
+        for k, v in misses.items())
+        + ". Four 95 % intervals miss twice or more with probability 1.4 %: where that "
+        "happens it points, with an SBC p below 0.05, to posteriors somewhat too narrow at "
+        "these chain lengths (SBC's burn-in of 300 steps from prior draws is short) or to a "
+        "likelihood detail not found yet; not resolved."]
     lines += ["", "Posterior sd of each normal score (the prior's is 1):", "",
               "| parameter | 1x | 10x |", "|---|---|---|"]
     for p in model.parameters:
         lines.append(f"| {p.name} | {rec[0]['score_sd'][p.name]:.2f} | "
                      f"{rec[1]['score_sd'][p.name]:.2f} |")
     (out / "calibration_sbc.md").write_text("\n".join(lines) + "\n")
-    (out / "calibration_sbc.json").write_text(json.dumps(
-        {"ranks": ranks.tolist(), "draws": args.draws, "uniformity": test, "recovery": rec}))
+    settings = {k: getattr(args, k) for k in ("replications", "draws", "walkers", "burn",
+                                                "steps", "nodes", "seed")}
+    kept.write_text(json.dumps({"ranks": ranks.tolist(), "settings": settings,
+                                "sbc_minutes": sbc_minutes, "uniformity": test,
+                                "recovery": rec}))
 
     import matplotlib
 

@@ -787,13 +787,18 @@ def finish_friction_draws(model: CalibrationModel, z: np.ndarray, measured: floa
 
 
 def simulate_drops(model: CalibrationModel, z_true: np.ndarray,
-                   rng: np.random.Generator, repeat: int = 1) -> CalibrationModel:
+                   rng: np.random.Generator, repeat: int = 1,
+                   center: bool = False) -> CalibrationModel:
     """The model with its targets' outcomes replaced by draws from the model itself at the
     normal scores `z_true` (ndim,): each target's drop heights (each repeated `repeat` times),
-    outcome ~ Bernoulli(P(observed go | H, theta_true)) (eq. (1) with the misclassification)."""
+    outcome ~ Bernoulli(P(observed go | H, theta_true)) (eq. (1) with the misclassification).
+    `center`: the heights are first shifted (in ln H) so that their geometric mean is the true
+    H50, as an experimenter bracketing the 50 % point would place them."""
     targets = []
     for t in model.targets:
         ln_h = np.repeat(t.ln_heights, repeat)
+        if center and ln_h.size:
+            ln_h = ln_h - ln_h.mean() + model.ln_h50(z_true[None, :], t)[0]
         p = model.go_probability(z_true[None, :], t, ln_h, observed=True)[0]
         targets.append(dataclasses.replace(t, ln_heights=ln_h, went=rng.random(ln_h.size) < p,
                                            _cache=t._cache))
@@ -866,13 +871,14 @@ def rank_uniformity(ranks: np.ndarray, draws: int, bins: int = 10) -> dict:
 def recovery(model: CalibrationModel, z_true: np.ndarray, *, repeats: Sequence[int],
              walkers: int, burn: int, steps: int, seed: int) -> list[dict]:
     """Posterior of synthetic drop sets made at known scores `z_true`: for each repeat factor
-    (1: the report's drop set; 10: each drop ten times), per target the true ln H50 [ln m] and
-    its posterior median, sd and whether it lies in the central 95 %, and per parameter the
-    posterior sd of its normal score (1 = the prior's)."""
+    (1: the report's drop set; 10: each drop ten times), the report's heights per target
+    shifted to centre on the true H50 (:func:`simulate_drops`), per target the true ln H50
+    [ln m] and its posterior median, sd and whether it lies in the central 95 %, and per
+    parameter the posterior sd of its normal score (1 = the prior's)."""
     rng = np.random.default_rng(seed)
     out = []
     for k in repeats:
-        sim = simulate_drops(model, z_true, rng, repeat=k)
+        sim = simulate_drops(model, z_true, rng, repeat=k, center=True)
         chain, _lnp, _acc = run_emcee(sim.log_posterior, sim.ndim, walkers=walkers, burn=burn,
                                       steps=steps, thin=10, seed=seed + k)
         z = chain.reshape(-1, sim.ndim)
