@@ -165,11 +165,12 @@ def main(argv=None) -> int:
         ax.hist(ranks[:, j] // width, bins=np.arange(11) - 0.5, color="C0")
         ax.axhline(args.replications / 10, color="k", lw=0.8)
         ax.set_title(p.name, fontsize=7)
+        ax.set_xlabel("rank bin (of 10)", fontsize=6)
         ax.tick_params(labelsize=6)
     for ax in axes.ravel()[model.ndim:]:
         ax.axis("off")
-    fig.suptitle(f"SBC rank histograms (10 bins, {args.replications} replications; line: "
-                 "uniform)", fontsize=9)
+    fig.suptitle(f"SBC: rank of each true score among {args.draws} posterior draws, 10 bins, "
+                 f"{args.replications} replications (line: the uniform count)", fontsize=9)
     fig.tight_layout()
     fig.savefig(out / "calibration_sbc.png", dpi=110)
     print(out / "calibration_sbc.md")
