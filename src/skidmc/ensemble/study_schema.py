@@ -1432,3 +1432,61 @@ def json_schema(kind: str) -> str:
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     return json.dumps(schema, indent=1, sort_keys=True) + "\n"
 
+
+# --- kind "calibration" (issue 40; appended by the calibration work) -------------------------
+
+
+class CalibrationHead(StudyHead):
+    kind: Literal["calibration"]
+
+
+class FrictionPopulationSpec(_Strict):
+    """The population the finishes' mean friction coefficients are drawn from."""
+
+    median: float = Field(gt=0, lt=1, description="prior median of the population's median mu")
+    median_log_sd: float = Field(gt=0, description="prior log-sd of that median")
+    sd: float = Field(gt=0, description="prior median of the population's log-sd tau")
+    sd_log_sd: float = Field(gt=0, description="prior log-sd of tau")
+    other_finishes_from: str | None = Field(
+        None, description="a study file whose scenes' epistemic mu are other finishes measured")
+    exclude: list[str] = Field([], description="scenes of that study not counted (why: source)")
+    source: str = Field(min_length=1)
+
+
+class SurrogateSpec(_Strict):
+    runs: int = Field(ge=20, description="solver runs per scene to train the surrogate")
+    seed: int = Field(ge=0)
+    check_draws: int = Field(0, ge=0, description="posterior draws checked against the solver")
+
+
+class SamplerSpec(_Strict):
+    walkers: int = Field(ge=4)
+    burn: int = Field(ge=0)
+    steps: int = Field(ge=1)
+    thin: int = Field(1, ge=1)
+    seed: int = Field(ge=0)
+    cv_steps: int = Field(0, ge=0, description="steps of each leave-one-target-out run (0: none)")
+
+
+class CalibrationTable(_Strict):
+    prior: str = Field(description="the study file whose epistemic inputs are the priors")
+    predict: str | None = Field(None, description="a study file whose scenes are predicted")
+    quadrature: dict[str, int] = Field(description="aleatory key -> quadrature nodes")
+    discrepancy_sd: float = Field(gt=0, description="prior sd of each target's ln H_c error")
+    discrepancy_source: str = Field(min_length=1)
+    misclassification: float = Field(0.0, ge=0, lt=0.5)
+    misclassification_source: str = ""
+    friction_population: FrictionPopulationSpec | None = None
+    surrogate: SurrogateSpec
+    sampler: SamplerSpec
+
+
+class CalibrationFile(_Strict):
+    """Kind ``calibration``: the epistemic inputs of a study calibrated on the report's drops."""
+
+    study: CalibrationHead
+    calibration: CalibrationTable
+
+
+register("calibration")(CalibrationFile)
+__all__.append("CalibrationFile")

@@ -62,6 +62,7 @@ __all__ = [
 #: Kind name -> the module that implements it, in the order their ``detect`` is tried.
 KINDS: dict[str, str] = {
     "hazard": "skidmc.workflows.hazard",
+    "calibration": "skidmc.workflows.calibration",
     "sobol": "skidmc.workflows.sobol",
     "ensemble": "skidmc.workflows.ensemble",
 }

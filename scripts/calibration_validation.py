@@ -1,0 +1,182 @@
+"""Validation of the calibration (issue 40 E): simulation-based calibration and recovery.
+
+    python scripts/calibration_validation.py [--replications 100] [--out results/validation]
+
+writes ``calibration_sbc.md`` (and ``calibration_sbc.png``, the rank histograms) there.
+
+The forward model is the calibration's own likelihood with surrogates of ln H_c standing in
+for the solver: quadratic least-squares polynomials fitted to the shipped first-series ensemble
+(``results/paper-series1/ensemble.h5``, 4 scenes x 10,000 solver runs; no new solver run), the
+friction factor integrated by the quadrature with fewer nodes than the shipped study (8 by
+default, for speed: SBC tests the sampler and the likelihood's code, for which the simulating
+and the fitting model must only agree; the quadrature's own accuracy is measured by doubling in
+every run of the kind). The
+model has no friction population (SBC needs the prior to be the N(0, 1) the scores are drawn
+from), and the same drop heights as the report's (Tables III, IV, the gold no-gos).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def sbc_model(nodes: int = 8):
+    """The calibration-series1 model (no population) on surrogates fitted to the shipped
+    ensemble."""
+    import skidmc
+    from skidmc.analysis.calibration import FEATURE_TRANSFORMS, fit_surrogate
+    from skidmc.workflows.calibration import _model, load
+
+    study = load(ROOT / "studies" / "calibration-series1.toml")
+    ds = skidmc.open_ensemble(ROOT / "results" / "paper-series1" / "ensemble.h5")
+    surrogates = {}
+    for sc in study.prior.scenes:
+        d = ds.sel(scene=sc.name)
+        surrogates[sc.name] = fit_surrogate(
+            {k: d[k].values.ravel() for k in FEATURE_TRANSFORMS if k in d},
+            np.log(d["critical_height"].values.ravel()), seed=1)
+    spec = study.spec.model_copy(deep=True)
+    spec.calibration.friction_population = None
+    spec.calibration.quadrature = {k: nodes for k in spec.calibration.quadrature}
+    study = dataclasses.replace(study, spec=spec, others=())
+    return _model(study, surrogates)
+
+
+def main(argv=None) -> int:
+    from skidmc.analysis.calibration import rank_uniformity, recovery, sbc_ranks
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--replications", type=int, default=100)
+    ap.add_argument("--draws", type=int, default=99, help="posterior draws ranked against")
+    ap.add_argument("--walkers", type=int, default=36)
+    ap.add_argument("--burn", type=int, default=300)
+    ap.add_argument("--steps", type=int, default=600)
+    ap.add_argument("--nodes", type=int, default=8, help="quadrature nodes of the friction")
+    ap.add_argument("--seed", type=int, default=2018)
+    ap.add_argument("--out", default=str(ROOT / "results" / "validation"))
+    ap.add_argument("--recovery-only", action="store_true",
+                    help="redo the recovery only, keeping the SBC ranks of the last full run")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    model = sbc_model(args.nodes)
+    kept = out / "calibration_sbc.json"
+    if args.recovery_only:  # the SBC ranks of the last full run, with its settings
+        old = json.loads(kept.read_text())
+        ranks, sbc_minutes = np.asarray(old["ranks"]), old["sbc_minutes"]
+        for key, value in old["settings"].items():
+            setattr(args, key, value)
+    else:
+        t0 = time.perf_counter()
+        ranks = sbc_ranks(model, args.replications, draws=args.draws, walkers=args.walkers,
+                          burn=args.burn, steps=args.steps, seed=args.seed,
+                          progress=lambda r: print(f"SBC replication {r}", file=sys.stderr)
+                          if r % 10 == 0 else None)
+        sbc_minutes = (time.perf_counter() - t0) / 60
+    test = rank_uniformity(ranks, args.draws, bins=10)
+    t0 = time.perf_counter()
+    z_true = np.random.default_rng(args.seed + 1).standard_normal(model.ndim)
+    rec = recovery(model, z_true, repeats=(1, 10), walkers=args.walkers, burn=2 * args.burn,
+                   steps=3 * args.steps, seed=args.seed + 2)
+    rec_minutes = (time.perf_counter() - t0) / 60
+
+    lines = ["# Calibration: simulation-based calibration and recovery", "",
+             "Written by `python scripts/calibration_validation.py` "
+             f"(--replications {args.replications} --draws {args.draws} --walkers "
+             f"{args.walkers} --burn {args.burn} --steps {args.steps} --nodes {args.nodes} "
+             f"--seed {args.seed}). "
+             "Forward model: the calibration's likelihood with quadratic surrogates of ln H_c "
+             "fitted to the shipped paper-series1 ensemble standing in for the solver, "
+             f"{args.nodes} quadrature nodes, no friction population (its prior must be the "
+             "N(0, 1) the true scores are drawn from), the report's drop heights (docstring of "
+             "the script).",
+             "", "## Simulation-based calibration (Talts et al. 2018)", "",
+             f"{args.replications} replications: scores drawn from the prior, drops simulated, "
+             f"the posterior sampled by emcee ({args.walkers} walkers, {args.burn} + "
+             f"{args.steps} steps), the rank of each true score among {args.draws} posterior "
+             "draws spread evenly over the chain; ranks binned in 10 bins, chi-square against "
+             f"uniform. {sbc_minutes:.1f} min.", "",
+             "| parameter | chi2 (9 dof) | p |", "|---|---|---|"]
+    for p, (chi2, pv) in zip(model.parameters, test["per_parameter"]):
+        lines.append(f"| {p.name} | {chi2:.1f} | {pv:.3f} |")
+    chi2, dof, pv = test["pooled"]
+    lines += ["", f"Pooled over the {model.ndim} parameters: chi2 = {chi2:.1f} on {dof} dof, "
+              f"p = {pv:.3f} (the parameters' ranks taken as independent). Smallest "
+              f"per-parameter p x {model.ndim} (Bonferroni): {test['min_p_bonferroni']:.3f}.",
+              "", "![rank histograms](calibration_sbc.png)", "",
+              "## Recovery", "",
+              "Drops simulated at one set of true scores (a prior draw, seed "
+              f"{args.seed + 1}), at the report's heights shifted in ln H to centre on each "
+              "target's true H50 (as an experimenter bracketing it would place them; at the "
+              "report's own heights a prior draw's H50 can lie far from every drop, which then "
+              "says little), as many drops as the report (1x) and each drop made ten times "
+              f"(10x); emcee {args.walkers} walkers, {2 * args.burn} + {3 * args.steps} "
+              f"steps. {rec_minutes:.1f} min.", "",
+              "| target | true H50 [ft] | 1x: median [ft], sd ln H50, in 95 %? | 10x: median "
+              "[ft], sd ln H50, in 95 %? |", "|---|---|---|---|"]
+    ft = 0.3048
+    for name in rec[0]["targets"]:
+        a, b = rec[0]["targets"][name], rec[1]["targets"][name]
+        lines.append(f"| {name} | {np.exp(a['true']) / ft:.3g} | {np.exp(a['median']) / ft:.3g}"
+                     f", {a['sd']:.3f}, {'yes' if a['inside_95'] else 'NO'} | "
+                     f"{np.exp(b['median']) / ft:.3g}, {b['sd']:.3f}, "
+                     f"{'yes' if b['inside_95'] else 'NO'} |")
+    misses = {row["repeat"]: [n for n, t in row["targets"].items() if not t["inside_95"]]
+              for row in rec}
+    lines += ["", "Verdict: " + "; ".join(
+        f"{k}x: the truth outside the 95 % interval for {', '.join(v) if v else 'no target'}"
+        for k, v in misses.items())
+        + ". Four 95 % intervals miss twice or more with probability 1.4 %: where that "
+        "happens it points, with an SBC p below 0.05, to posteriors somewhat too narrow at "
+        "these chain lengths (SBC's burn-in of 300 steps from prior draws is short) or to a "
+        "likelihood detail not found yet; not resolved."]
+    lines += ["", "Posterior sd of each normal score (the prior's is 1):", "",
+              "| parameter | 1x | 10x |", "|---|---|---|"]
+    for p in model.parameters:
+        lines.append(f"| {p.name} | {rec[0]['score_sd'][p.name]:.2f} | "
+                     f"{rec[1]['score_sd'][p.name]:.2f} |")
+    (out / "calibration_sbc.md").write_text("\n".join(lines) + "\n")
+    settings = {k: getattr(args, k) for k in ("replications", "draws", "walkers", "burn",
+                                                "steps", "nodes", "seed")}
+    kept.write_text(json.dumps({"ranks": ranks.tolist(), "settings": settings,
+                                "sbc_minutes": sbc_minutes, "uniformity": test,
+                                "recovery": rec}))
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cols = 6
+    rows = (model.ndim + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(13, 2.1 * rows))
+    width = (args.draws + 1) // 10
+    for ax, p, j in zip(axes.ravel(), model.parameters, range(model.ndim)):
+        ax.hist(ranks[:, j] // width, bins=np.arange(11) - 0.5, color="C0")
+        ax.axhline(args.replications / 10, color="k", lw=0.8)
+        ax.set_title(p.name, fontsize=7)
+        ax.set_xlabel("rank bin (of 10)", fontsize=6)
+        ax.tick_params(labelsize=6)
+    for ax in axes.ravel()[model.ndim:]:
+        ax.axis("off")
+    fig.suptitle(f"SBC: rank of each true score among {args.draws} posterior draws, 10 bins, "
+                 f"{args.replications} replications (line: the uniform count)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(out / "calibration_sbc.png", dpi=110)
+    print(out / "calibration_sbc.md")
+    print(f"pooled chi2 {chi2:.1f} on {dof} dof, p = {pv:.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
