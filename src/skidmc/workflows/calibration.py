@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import json
 import math
 import os
 import time
@@ -35,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skidmc.workflows import reporting
 from skidmc.workflows.registry import Outcome, ReportOptions, RunOptions
 
 __all__ = ["DESCRIPTION", "REFUSED", "REPORT_OPTIONS", "RUN_OPTIONS", "CalibrationStudy",
@@ -555,7 +555,7 @@ def run(study: CalibrationStudy, options: RunOptions) -> Outcome:
         "predict_study_text": study.predict.text if study.predict is not None else "",
         "fingerprint": fingerprint, "sampler_seed": c.sampler.seed,
         "surrogate_seed": c.surrogate.seed, "command": options.command or "",
-        "completed": timestamp(), "summary": json.dumps(summary),
+        "completed": timestamp(), "summary": reporting.dumps(summary, indent=None),
     })
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
