@@ -53,6 +53,7 @@ def sbc_model(nodes: int = 8):
 
 def main(argv=None) -> int:
     from skidmc.analysis.calibration import rank_uniformity, recovery, sbc_ranks
+    from skidmc.scene.units import FOOT
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--replications", type=int, default=100)
@@ -131,7 +132,7 @@ def main(argv=None) -> int:
               f"steps. {rec_minutes:.1f} min.", "",
               "| target | true H50 [ft] | 1x: median [ft], sd ln H50, in 95 %? | 10x: median "
               "[ft], sd ln H50, in 95 %? |", "|---|---|---|---|"]
-    ft = 0.3048
+    ft = FOOT  # [m/ft]
     for name in rec[0]["targets"]:
         a, b = rec[0]["targets"][name], rec[1]["targets"][name]
         lines.append(f"| {name} | {np.exp(a['true']) / ft:.3g} | {np.exp(a['median']) / ft:.3g}"

@@ -33,12 +33,13 @@ from scipy.sparse import diags
 
 from skidmc.scene import make_scene
 from skidmc.scene.materials import format_table, parse_table, table_text
+from skidmc.scene.units import FOOT
 from skidmc.solver import critical_height, simulate
 from skidmc.solver.model import build_model, target_property_table
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "results" / "validation" / "temperature_dependent_targets.md"
-FT = 0.3048
+FT = FOOT  # [m/ft]
 RTOL = 1e-3
 Q = 3e7            # constant flux of the validation cases [W/m^2]
 HE_K = 1e-9        # the nearly insulating HE's conductivity [W/(m K)]: ~3e-5 of the flux

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skidmc.scene.units import FOOT
 from skidmc.workflows import reporting
 from skidmc.workflows.registry import Outcome, ReportOptions, RunOptions
 
@@ -52,7 +53,7 @@ REFUSED = {
     "confidence": "its intervals are fixed: 90 % (5-95 %) for H50 and the go curves",
 }
 
-FT = 0.3048
+FT = FOOT  # [m/ft]
 #: Prior draws kept (and used for the prior predictive) [1].
 PRIOR_DRAWS = 2000
 
