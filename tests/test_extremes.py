@@ -272,14 +272,23 @@ def test_self_heating_just_after_the_exit_is_censored_above():
 
 
 def test_flags_fit_storage_width():
-    # storage keeps the comma-separated flags in 64 characters; every combination that can occur
-    # together must fit (self_heating and hot_ignition exclude each other in practice: one needs
-    # a runaway at T0 within an hour, the other a runaway within t_exit only above 1000 K;
-    # no_friction simulates nothing).
-    together = ["stops_sliding", "stops_early", "hot_ignition", "crushed", "long_slide"]
-    assert len(",".join(together)) <= 64
-    assert len(",".join(["stops_sliding", "stops_early", "self_heating", "crushed",
-                         "long_slide"])) <= 64
+    # storage keeps the comma-separated flags in a fixed width (ensemble.storage.OUTPUTS); every
+    # combination that can occur together must fit (self_heating and hot_ignition exclude each
+    # other in practice: one needs a runaway at T0 within an hour, the other a runaway within
+    # t_exit only above 1000 K; no_friction simulates nothing). Of the target's regime flags at
+    # most two occur together: yielding targets are untabled homogeneous floors, tabled targets
+    # (temperature_target / constant_target) are rigid ceramics and never layered, layered stacks
+    # are rigid metals. rtol_unmet and implausible_input can join any of them.
+    from skidmc.ensemble.storage import OUTPUTS
+
+    width = next(v.width for v in OUTPUTS if v.name == "flags")
+    model = ["stops_sliding", "stops_early", "hot_ignition", "crushed", "long_slide"]
+    ensemble = ["rtol_unmet", "implausible_input"]
+    for regime in (["yielding_target"], ["temperature_target"], ["layered_target"],
+                   ["top_layer_only"], ["constant_target"]):
+        for first in ("hot_ignition", "self_heating"):
+            flags = [first if f == "hot_ignition" else f for f in model] + regime + ensemble
+            assert len(",".join(flags)) <= width, flags
 
 
 # --- monotone trends --------------------------------------------------------------------------

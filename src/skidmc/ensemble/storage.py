@@ -173,9 +173,10 @@ OUTPUTS: tuple[VariableSpec, ...] = (
         "comment": "ok; censored_above: no event up to solver h_max; censored_below: event at "
                    "solver h_min; failed: see failure_reason; empty: not evaluated yet"}),
     VariableSpec("evaluations", "i4", "1", "number of impact simulations used"),
-    # 128: the model's validity flags that can occur together take up to ~60 characters
-    # (tests/test_extremes.py), rtol_unmet and implausible_input 29 more (files written with
-    # 64 keep their width: EnsembleFile.write_chunk writes to the file's own width)
+    # 128: the model's validity flags that can occur together take up to ~60 characters, the
+    # target's regime flag (temperature_target, the longest) 19 more, rtol_unmet and
+    # implausible_input 29 more: 108 (tests/test_extremes.py checks each combination; files
+    # written with 64 keep their width: EnsembleFile.write_chunk writes to the file's own width)
     VariableSpec("flags", "str", "-", "solver flags (comma separated)", width=128),
     VariableSpec("failure_reason", "str", "-", "why the sample failed (exception type and "
                  "message)", width=256),
