@@ -108,6 +108,43 @@ def test_nested_report_names_the_band_it_computed(tmp_path):
     assert f"{band(EPISTEMIC_BAND)} of per-draw H50" in text
 
 
+def test_the_studys_own_assumptions_are_printed_as_written(tmp_path):
+    ds = _ensemble(n=64)
+    said = ["The shape of k(T) is the steepest reading (not sampled).", "E/R's upper half mirrors."]
+    ds.attrs["study"] = {"study": {"name": "synthetic", "assumptions": said}}
+    write_report(ds, tmp_path, source="synthetic.h5")
+    text = (tmp_path / "summary.md").read_text()
+    section = text[text.index("## Assumptions of the study"):]
+    assert [ln[2:] for ln in section.splitlines() if ln.startswith("- ")][:2] == said
+    ds.attrs["study"] = {"study": {"name": "synthetic"}}
+    write_report(ds, tmp_path, source="synthetic.h5")
+    assert "Assumptions of the study" not in (tmp_path / "summary.md").read_text()
+
+
+def test_a_study_refuses_assumptions_that_are_not_sentences(tmp_path):
+    from skidmc.ensemble.study import StudyError, load_study
+
+    text = """[study]
+name = "k"
+assumptions = "one string, not a list"
+[scene]
+preset = "paper-quartz"
+[uncertain.mu]
+distribution = "uniform"
+loc = 0.08
+scale = 0.06
+source = "test"
+[design]
+method = "mc"
+n = 8
+seed = 1
+"""
+    path = tmp_path / "k.toml"
+    path.write_text(text)
+    with pytest.raises(StudyError, match=r"study\.assumptions.*one string, not a list"):
+        load_study(path)
+
+
 # --- the hazard summary ---------------------------------------------------------------------------
 
 

@@ -10,6 +10,8 @@ run with a :class:`StudyError` naming the file, the key and the value. The forma
     # kind = "ensemble"                 # or "sobol" (grows N to n_max); without it: "sobol"
     #                                   # for a saltelli design with n_max, else "ensemble"
     #                                   # (skidmc.workflows.registry)
+    # assumptions = ["..."]             # judgements no input's source states, printed by
+    #                                   # `skidmc report` under "Assumptions of the study"
 
     [scene]                             # one scene: a preset plus overrides (units allowed) ...
     preset = "paper-quartz"

@@ -831,6 +831,9 @@ class StudyHead(_Table):
     description: Annotated[str, _string()] = ""
     kind: Annotated[str, _string()] | None = Field(
         None, description="the kind of study (skidmc.workflows.registry); inferred if absent")
+    assumptions: Annotated[list[str], BeforeValidator(_sentences)] = Field(
+        [], description="the study's judgements that no input's source states, one sentence "
+        "each; the report prints them under Assumptions")
 
 
 class StudyFile(_Table):

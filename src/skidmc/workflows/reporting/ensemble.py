@@ -211,13 +211,20 @@ def _assumption_lines(ds: xr.Dataset) -> list[str]:
         if "ASSUMPTION" not in notes:
             continue
         lines.append(f"- Preset `{name}`: {notes[notes.index('ASSUMPTION'):]}")
-    if not lines:
-        return []
-    sampled = (doc.get("uncertain") or {}).get("billet_mass", {})
-    if sampled.get("kind") == "epistemic":
-        lines.append(f"- This study samples the billet mass as an epistemic input: "
-                     f"{sampled.get('source', '')}.")
-    return ["## Assumptions of the presets (not in the report)", ""] + lines + [""]
+    out = []
+    if lines:
+        sampled = (doc.get("uncertain") or {}).get("billet_mass", {})
+        if sampled.get("kind") == "epistemic":
+            lines.append(f"- This study samples the billet mass as an epistemic input: "
+                         f"{sampled.get('source', '')}.")
+        out += ["## Assumptions of the presets (not in the report)", ""] + lines + [""]
+    own = (doc.get("study") or {}).get("assumptions") or []
+    if own:
+        out += ["## Assumptions of the study", "",
+                "Judgements no input's source states (the study file's `assumptions`); each "
+                "input's own source is stored with the results.", ""]
+        out += [f"- {a.strip()}" for a in own] + [""]
+    return out
 
 
 def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str,
