@@ -9,7 +9,9 @@ never from the experiments' 50 % heights:
 2. Target properties at the heated layer's temperature: handbook temperature tables (Incropera,
    DeWitt, Bergman & Lavine, Fundamentals of Heat and Mass Transfer, 6th ed., Table A.2) averaged
    over the layer, T0 to the surface temperature at ignition (the Kirchhoff mean, the property
-   that a conduction problem with temperature-dependent properties sees on average).
+   that a conduction problem with temperature-dependent properties sees on average): how the
+   report's Table VI values read. The studies themselves now take the tables (issue 42); what
+   the one judgement left in them (the 85 % alumina grade's fall with T) does to the heights.
 3. Friction: the epistemic uncertainty of a finish's mean and the drop-to-drop scatter, from
    the report's one replicated finish (Table I vs Table V) and its film counts (Tables III-V).
 4. Kinetics: the published one-step HMX pairs of ``skidmc/data/properties/`` and the spread of
@@ -87,6 +89,52 @@ def kinetics_pairs():
     return list(csv.DictReader(lines))
 
 
+def glassy_phase_lines():
+    """The studies' ceramics take temperature tables (issue 42): k at 300 K is sampled and the
+    registry's table gives k(T), c(T). What the one judgement left in the alumina table does:
+    the 85 % grade's fall of k with T, taken as dense alumina's (the steepest reading), against
+    half that fall in ln k (its glassy phase conducts better when hot)."""
+    from skidmc.scene.materials import PROPERTY_TABLES, format_table
+
+    tab = PROPERTY_TABLES["alumina-85"]
+    t = np.asarray(tab.temperature)
+    k = np.asarray(tab.conductivity)
+    have = [i for i, c in enumerate(tab.heat_capacity) if c is not None]
+    c = np.interp(t, t[have], [tab.heat_capacity[i] for i in have])
+    k300 = float(np.interp(300.0, t, k))
+    # A series-resistance estimate of the glassy phase: 1/k85 = 1/k_alumina + b/k_glass with
+    # k_glass fused silica's (Incropera Table A.2), b fixed by k85 = 15 W/(m K) at 300 K.
+    b = 1.38 * (1 / 15.0 - 1 / 36.0)
+    k85_800 = 1.0 / (1.0 / 10.4 + b / 2.17)
+    fall = math.log(k85_800 / 15.0) / math.log(10.4 / 36.0)
+    lines = ["### Temperature tables and the alumina grade's fall", "",
+             "The studies take the registry's tables (`alumina-85`: dense alumina's shape, "
+             "Incropera Table A.2; `fused-quartz`: fused silica's), scaled to a sampled k at "
+             "300 K: 14-16 W/(m K) for the 85 % grade, 1.31-1.45 W/(m K) (1.38 +/- 5 %) for "
+             "fused silica. Critical heights at rtol 1e-3, k at 300 K = 15 W/(m K), with the "
+             "table's full fall of ln k and with half of it:", "",
+             "| preset | full fall [ft] | half the fall [ft] | ratio |", "|---|---|---|---|"]
+    for preset in ("paper-alumina-smooth", "paper-alumina-rough"):
+        hs = []
+        for f in (1.0, 0.5):
+            rows = list(zip(t.tolist(), (k300 * (k / k300) ** f).tolist(), c.tolist()))
+            scene = make_scene(preset=preset, target="alumina-85",
+                               **{"target.table": format_table(300.0, rows)})
+            hs.append(critical_height(scene, rtol=1e-3).critical_height_ft)
+        lines.append(f"| {preset} | {hs[0]:.3g} | {hs[1]:.3g} | {hs[1] / hs[0]:.3f} |")
+    lines += ["",
+              "- A series-resistance estimate (the glassy phase as fused silica in series with "
+              "dense alumina, sized so that the grade has 15 W/(m K) at 300 K) gives "
+              f"{k85_800:.1f} W/(m K) at 800 K, a fall {fall:.2f} of dense alumina's in ln k: "
+              "it favours about half the fall, but it is a one-parameter sketch, not a "
+              "measurement of the grade, and no table of an 85 % grade was found. The shape is "
+              "not a sampled input; the shipped studies take the full fall, the cautious "
+              "reading (lower heights), and their alumina heights would rise by the ratio "
+              "above under the other. The study summaries list this under their assumptions.",
+              ""]
+    return lines
+
+
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
     md = ["# Derivation of the shipped studies' uncertain inputs",
@@ -141,7 +189,8 @@ def main():
     a_hi = ALUMINA85_K300[1] * (0.5 + 0.5 * max(ratio))
     md += ["", f"- Fused quartz: k = {min(q_k):.2f}-{max(q_k):.2f} W/(m K) over the ignition "
            f"range (the report's 1.695 lies {where}); "
-           f"with the +/-5 % spread of handbook fused-silica k at 300 K, the studies' range is "
+           f"with the +/-5 % spread of handbook fused-silica k at 300 K, the layer-mean reading "
+           "(the studies' constants before they took the tables) is "
            f"{0.95 * min(q_k):.2f}-{1.05 * max(q_k):.2f} W/(m K). Density {FUSED_SILICA_RHO:.0f} "
            f"kg/m^3 and heat capacity {q_c_mid:.0f} J/(kg K) (layer mean at T_p) go with it.",
            f"- 85 % alumina: 14-16 W/(m K) at 300 K times the dense-alumina ratio: "
@@ -151,6 +200,7 @@ def main():
            f"{layer_mean(ALUMINA_C, t_pivot):.0f} "
            "J/(kg K) (dense alumina's layer mean at T_p; the report's 753 is alumina at 300 K).",
            ""]
+    md += glassy_phase_lines()
 
     # 3. friction ---------------------------------------------------------------------------
     d = math.log(0.132 / 0.114)
@@ -241,9 +291,9 @@ def main():
            f"{s_k:.2f}) would add the 550-K-pinned spread of H_c to E/R's own at 760 K, about "
            "doubling the kinetic spread of ln H_c. **The studies pivot at 550 K.** The medians "
            "stay centred: E/R is symmetric about the report's value and H_c is monotone in it.",
-           "- Spread of the rate at 550 K: the three cited pairs agree within "
-           f"{s_m:.2f}, but they are near-copies of one another (log10 Z = 19.7 in all "
-           "three); thermal-analysis "
+           f"- Spread of the rate at 550 K: the {len(pairs)} cited pairs' ln k(550 K) have sd "
+           f"{s_m:.2f}, but three of them are near-copies of one another (log10 Z = 19.7); "
+           "thermal-analysis "
            "experiments see HMX decompose at 500-560 K on minute-to-hour time scales, so fits "
            "of them cannot differ there by much more than a decade: log-sd 1.15 (one decade at "
            "2 sigma), a judgement wider than the pairs' own agreement.", ""]

@@ -187,8 +187,9 @@ def test_bad_heights_are_named():
 def test_physics_prior_reads_the_shipped_csv():
     pr = physics_prior("alumina_50_80")
     # the CSV holds 50 epistemic draws of the paper-series1 ensemble; the model's median H50 for
-    # this target is ~24 ft with ~0.4 sd in ln (results/paper-series1/summary.md, 'predicted')
-    assert 15 < pr.h50 < 40 and 0.2 < pr.location[1] < 0.6
+    # this target is ~15 ft with ~0.46 sd in ln (results/paper-series1/summary.md, 'predicted',
+    # since the alumina scenes take their temperature tables); bounds a factor ~2 either side
+    assert 7 < pr.h50 < 30 and 0.2 < pr.location[1] < 0.7
     assert 0.3 < math.exp(pr.log_sigma[0]) < 0.5
     metres = physics_prior("alumina_50_80", units="m")
     assert math.isclose(metres.h50, pr.h50 * 0.3048, rel_tol=1e-12)

@@ -131,6 +131,36 @@ def test_sobol_on_a_saltelli_ensemble_ranks_the_inputs():
     assert bool(event["ST_contains_zero"].sel(parameter="angle"))
 
 
+def test_sobol_leaves_out_a_design_column_the_scene_does_not_vary():
+    from SALib.sample import sobol as saltelli
+
+    keys = ["mu", "flow_stress", "target.conductivity"]
+    problem = {"num_vars": 3, "names": keys, "bounds": [[0.0, 1.0]] * 3}
+    x = saltelli.sample(problem, 64, calc_second_order=False, scramble=True, seed=4)
+    # Scene "a" samples all three columns; scene "b" (a layered target, say) holds its
+    # conductivity: its stored input is one value on every row, whatever the design column says.
+    ln_a = 2.0 * x[:, 0] + 0.5 * x[:, 1] + 0.3 * x[:, 2]
+    ln_b = 2.0 * x[:, 0] + 0.5 * x[:, 1]
+    k = np.stack([10.0 + x[:, 2], np.full(len(x), 317.0)])
+    ds = xr.Dataset({"critical_height": (("scene", "sample"), np.exp(np.stack([ln_a, ln_b]))),
+                     "status": (("scene", "sample"), np.full((2, len(x)), "ok", dtype=object)),
+                     "target.conductivity": (("scene", "sample"), k)},
+                    coords={"scene": ["a", "b"]},
+                    attrs={"design_method": "saltelli", "design_keys": keys,
+                           "saltelli_second_order": 0, "solver_h_max": 1e4})
+    a = ensemble_sobol(ds, "a", resamples=50)
+    assert list(a["parameter"].values) == keys and a.attrs["not_varied"] == ""
+    b = ensemble_sobol(ds, "b", resamples=50)
+    assert list(b["parameter"].values) == keys[:2]
+    assert b.attrs["not_varied"] == "target.conductivity"
+    # the inputs kept have the indices they have with the column in: leaving it out is exact
+    full = ensemble_sobol(ds.drop_vars("target.conductivity"), "b", resamples=50)
+    assert full["ST"].sel(parameter="target.conductivity") == 0.0
+    np.testing.assert_array_equal(b["ST"].values, full["ST"].sel(parameter=keys[:2]).values)
+    conv = ensemble_sobol(ds, "b", resamples=50, convergence=True)
+    assert list(conv["parameter"].values) == keys[:2]
+
+
 def test_sobol_refuses_other_designs():
     with pytest.raises(ValueError, match="design_method = 'mc'"):
         ensemble_sobol(_ensemble(), "quartz")

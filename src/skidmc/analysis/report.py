@@ -325,8 +325,10 @@ def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
     """Sobol' indices of ln H_c of one scene of a ``saltelli`` ensemble.
 
     The design columns are the study's uncertain keys (uniform on [0, 1), mapped to each scene's
-    distributions: the indices are invariant under those monotone maps). A key that a scene does
-    not vary gets indices near 0.
+    distributions: the indices are invariant under those monotone maps). A key that this scene
+    does not vary (a column of the design that another scene samples: its stored input is one
+    value on every row) has no effect on it, so its indices are 0 by construction; it is left out
+    of the result and named in the ``not_varied`` attribute (comma-separated).
 
     Parameters
     ----------
@@ -377,16 +379,30 @@ def ensemble_sobol(ds: xr.Dataset, scene: str, *, confidence: float = 0.95,
         prepared = dataclasses.replace(
             prepared, output=event_indicator(np.exp(prepared.output), drop_height))
         output_name = f"event at a drop from {drop_height:.4g} m (1 where H_c <= H)"
+    held = [k for k in keys if k in sub.data_vars
+            and np.unique(np.asarray(sub[k].values).reshape(-1)).size == 1]
     if convergence:
         from skidmc.analysis.sensitivity import sobol_convergence
 
-        return sobol_convergence(problem, prepared.output, second_order=second,
+        conv = sobol_convergence(problem, prepared.output, second_order=second,
                                  confidence=confidence, resamples=resamples, seed=seed)
+        return _without(conv, held)
     res = sobol_indices(problem, prepared.output, second_order=second, confidence=confidence,
                         resamples=resamples, seed=seed)
     res.attrs.update(output=output_name, policy=str(policy),
                      censored_share=prepared.censored_share,
                      failed_share=prepared.failed_share, dropped_share=prepared.dropped_share)
+    return _without(res, held)
+
+
+def _without(res: xr.Dataset, held: list[str]) -> xr.Dataset:
+    """Indices without the inputs in `held` (not varied in this scene), named in
+    ``not_varied``."""
+    if held:
+        res = res.drop_sel(parameter=held)
+        if "parameter_2" in res.dims:
+            res = res.drop_sel(parameter_2=held)
+    res.attrs["not_varied"] = ", ".join(held)
     return res
 
 

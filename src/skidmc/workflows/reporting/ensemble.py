@@ -330,6 +330,9 @@ def _markdown(ds: xr.Dataset, analyses: list[SceneAnalysis], source: str,
                       f"{_fmt(res.attrs.get('dropped_share'), 2)}", "",
                       "| rank | input | S1 | ST |", "|---|---|---|---|"]
             lines += _sobol_rows(res)
+            if res.attrs.get("not_varied"):
+                lines += ["", f"Not varied in this scene (held at its value; indices 0 by "
+                          f"construction, left out): {res.attrs['not_varied']}."]
             if a.sobol_event is not None:
                 lines += ["", f"What decides a go at H = {a.fit.h50:.3g} ft (the median critical "
                           "height): indices of the event indicator.", "",
