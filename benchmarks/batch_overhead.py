@@ -124,7 +124,10 @@ def child(n, rtol, seed):
 
 
 def _first_pool(n, rtol, seed, src):
-    env = dict(os.environ, PYTHONPATH=str(src))
+    # Each tree its own numba cache (skidmc._numba_cache keys it by the tree's source): the
+    # NUMBA_CACHE_DIR this process set would make the trees overwrite each other's kernels.
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["PYTHONPATH"] = str(src)
     out = subprocess.run([sys.executable, __file__, "--child", "--n", str(n), "--rtol",
                           repr(rtol), "--seed", str(seed)], env=env, capture_output=True,
                          text=True, check=True)

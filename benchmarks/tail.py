@@ -27,9 +27,11 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import os
 import platform
+import subprocess
 import sys
 import time
 from collections import defaultdict
@@ -61,6 +63,7 @@ class Instrument:
         self.attempts = defaultdict(int)
         self.runs = defaultdict(int)
         self.first_width = None
+        self.estimates = []   # error estimates of the search's Richardson pairs, in order
 
     def _wrap(self, name, make):
         original = getattr(self.search, name)
@@ -133,6 +136,14 @@ class Instrument:
                     inst.seconds["fast guess"] += time.perf_counter() - t0
             return wrapped
 
+        def richardson(original):
+            def wrapped(*args, **kw):
+                res = original(*args, **kw)
+                inst.estimates.append(res.error_estimate)
+                return res
+            return wrapped
+
+        self._wrap("_richardson", richardson)
         self._wrap("simulate", simulate)
         self._wrap("_search", search_)
         self._wrap("_fine_search", fine)
@@ -153,11 +164,58 @@ def regime(scene):
     return search._exit_regime(scene)
 
 
-def measure(scenes, repeat):
+def times_only(scenes, repeat, rtol):
+    """Per-height times [s] of ``scenes`` at ``rtol`` (the smaller of ``repeat`` calls)."""
+    import skidmc
+
+    skidmc.critical_height(scenes[0][2], rtol=rtol)
+    out = []
+    for _, _, scene in scenes:
+        best = math.inf
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            try:
+                skidmc.critical_height(scene, rtol=rtol)
+            except Exception:  # noqa: BLE001, S110 - timed as it is
+                pass
+            best = min(best, time.perf_counter() - t0)
+        out.append(best)
+    return out
+
+
+def _tree_times(args, rtol, src):
+    """times_only in a fresh process on the source tree ``src``."""
+    # Each tree its own numba cache (skidmc._numba_cache keys it by the tree's source): the
+    # NUMBA_CACHE_DIR this process set would make the trees overwrite each other's kernels.
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["PYTHONPATH"] = str(src)
+    got = subprocess.run([sys.executable, __file__, "--child", repr(rtol), "--n", str(args.n),
+                          "--seed", str(args.seed), "--repeat", str(args.repeat)], env=env,
+                         capture_output=True, text=True, check=True)
+    return json.loads(got.stdout.strip().splitlines()[-1])
+
+
+def side_by_side(args, rtol):
+    """Per-scene times [s] of the tree ``args.base`` and of this one, each in fresh processes
+    taking turns (base, this, base, this, ... ``args.pairs`` times): the smaller per scene."""
+    import skidmc
+
+    here = Path(skidmc.__file__).resolve().parents[1]
+    runs = {"base": [], "this": []}
+    for _ in range(args.pairs):
+        runs["base"].append(_tree_times(args, rtol, args.base))
+        runs["this"].append(_tree_times(args, rtol, here))
+    return {name: np.min(np.array(r), axis=0).tolist() for name, r in runs.items()}
+
+
+def measure(scenes, repeat, args=None):
     import skidmc
 
     rows = []
+    base = {}
     for rtol in RTOLS:
+        if args is not None and args.base:
+            base[rtol] = side_by_side(args, rtol)
         skidmc.critical_height(scenes[0][2], rtol=rtol)   # load what this rtol uses
         for label, group, scene in scenes:
             best, res, error = math.inf, None, ""
@@ -184,13 +242,14 @@ def measure(scenes, repeat):
                 row.update(height=res.critical_height, evaluations=res.evaluations,
                            level=res.level, flags=";".join(res.flags),
                            censored=res.censored or "", estimate=res.error_estimate)
+            row["first estimate"] = inst.estimates[0] if inst.estimates else math.nan
             for phase in PHASES:
                 row[f"share {phase}"] = seconds.get(phase, 0.0) / total if total > 0 else 0.0
                 row[f"runs {phase}"] = inst.runs.get(phase, 0)
                 row[f"attempts {phase}"] = inst.attempts.get(phase, 0)
             rows.append(row)
         print(f"rtol {rtol:g}: {len(scenes)} scenes", flush=True)
-    return rows
+    return rows, base
 
 
 def _stats(ms):
@@ -199,7 +258,7 @@ def _stats(ms):
             float(ms.max()))
 
 
-def markdown(args, scenes, rows, load_before, load_after):
+def markdown(args, scenes, rows, base, load_before, load_after):
     groups = sorted({g for _, g, _ in scenes})
     lines = [
         "# The slow tail of study scenes: per-height time and where it goes",
@@ -230,6 +289,17 @@ def markdown(args, scenes, rows, load_before, load_after):
         lines.append(f"| {rtol:g} | {len(sel)} | {mean:.2f} | {med:.2f} | {p90:.2f} | "
                      f"{mx:.2f} | {mean / med:.2f} | {mx / med:.1f} | "
                      f"{np.mean(ev):.1f}, {max(ev)} |")
+    if base:
+        lines += ["", f"Side by side with the tree at `{args.base}`: both timed in fresh "
+                  f"processes taking turns ({args.pairs} pairs per rtol, the same scenes and "
+                  "repeats; per scene the smaller time of its runs):", "",
+                  "| rtol | tree | mean | median | p90 | max |", "|---|---|---|---|---|---|"]
+        for rtol in RTOLS:
+            for name in ("base", "this"):
+                ms = [1e3 * t for t in base[rtol][name]]
+                mean, med, p90, mx = _stats(ms)
+                lines.append(f"| {rtol:g} | {name} | {mean:.2f} | {med:.2f} | {p90:.2f} | "
+                             f"{mx:.2f} |")
     lines += ["", "## By group and regime at rtol 1e-3 [ms]", "",
               "| group | regime | scenes | mean | median | p90 | max | share of the total time |",
               "|---|---|---|---|---|---|---|---|"]
@@ -259,6 +329,24 @@ def markdown(args, scenes, rows, load_before, load_after):
             lines.append(f"| {rtol:g} | {name} | "
                          + " | ".join(f"{100 * s:.0f} %" for s in shares)
                          + f" | {runs:.1f} | {att:.0f} |")
+    lines += ["", "## What a refinement costs, and what skipping it would give up", "",
+              "A scene refines when its first pair's a posteriori estimate exceeds rtol and the "
+              "roots alone cannot bring it within (the pair moves one level up). Time without "
+              "the refine phase: each scene's time x (1 - its refine share); the first pair's "
+              "estimate is what such a scene would report instead (flag rtol_unmet).", "",
+              "| rtol | scenes refined | their share of the time | mean, median, p90, max "
+              "without refining [ms] | first-pair estimate of the refined / rtol (median, "
+              "max) |", "|---|---|---|---|---|"]
+    for rtol in RTOLS:
+        sel_r = [r for r in rows if r["rtol"] == rtol]
+        refined = [r for r in sel_r if r["runs refine"] > 0]
+        share = (sum(r["seconds"] for r in refined) / sum(r["seconds"] for r in sel_r))
+        cut = [1e3 * r["seconds"] * (1 - r["share refine"]) for r in sel_r]
+        mean, med, p90, mx = _stats(cut)
+        est = [r["first estimate"] / rtol for r in refined if math.isfinite(r["first estimate"])]
+        est_text = (f"{np.median(est):.2f}, {max(est):.2f}" if est else "-")
+        lines.append(f"| {rtol:g} | {len(refined)} of {len(sel_r)} | {100 * share:.0f} % | "
+                     f"{mean:.2f}, {med:.2f}, {p90:.2f}, {mx:.2f} | {est_text} |")
     lines += ["", "## The slowest 12 scenes at rtol 1e-3", "",
               "| scene | group | regime | ms | evaluations | final level | flags | "
               "phases (share of time > 5 %) | attempts |", "|---|---|---|---|---|---|---|---|---|"]
@@ -300,14 +388,22 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=45)
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
+    parser.add_argument("--base", help="the src folder of another tree, timed side by side")
+    parser.add_argument("--pairs", type=int, default=3, help="side-by-side pairs per rtol")
+    parser.add_argument("--child", type=float, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child:
+        print(json.dumps(times_only(study_scenes.draw(args.n, args.seed), args.repeat,
+                                    args.child)))
+        return 0
     load_before = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     scenes = study_scenes.draw(args.n, args.seed)
-    rows = measure(scenes, args.repeat)
+    rows, base = measure(scenes, args.repeat, args)
     load_after = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "tail.md").write_text(markdown(args, scenes, rows, load_before, load_after))
+    (out / "tail.md").write_text(markdown(args, scenes, rows, base, load_before,
+                                          load_after))
     with open(out / "tail.csv", "w", newline="") as f:
         fields = list(dict.fromkeys(k for r in rows for k in r))
         writer = csv.DictWriter(f, fieldnames=fields)

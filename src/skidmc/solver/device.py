@@ -31,6 +31,10 @@ Where it differs from the CPU search, and why
   reaches below the top layer, and targets whose properties follow a temperature table
   ("temperature_target"; the thread's target has constant properties). The batch front end
   (:func:`skidmc.solver.cuda.cuda_critical_heights`) does this; no sample is lost.
+* Stalled runs: the same cap as the CPU search (:func:`run_cap`, the rule of
+  :func:`skidmc.solver.simulate.stall_cap`: 10x the most step attempts of the search's earlier
+  runs, at least 4,000, 12,500 x 2^level in any case), so a run that stalls hands its scene to
+  the CPU search after a few thousand attempts instead of 200,000.
 """
 
 from __future__ import annotations
