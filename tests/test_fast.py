@@ -97,6 +97,16 @@ def test_melt_depression_table():
     assert np.all(np.diff(g) <= 0.0)  # more melting the further T_s is above T_m
 
 
+def test_stored_melt_table_is_the_computed_one():
+    # MELT_TABLE is read from skidmc/data/melt_table.txt (scripts/make_melt_table.py), not
+    # computed at import. It is melt_table()'s values written exactly (float.hex), so on the
+    # scipy it was written with the two agree bit for bit; the tolerance admits only the
+    # last-bit differences another scipy release's erfc (cephes, ~1e-16 relative) could make
+    # through the Newton solve and the 48-point sum.
+    assert fast.MELT_TABLE.shape == (fast.MELT_TABLE_POINTS,)
+    np.testing.assert_allclose(fast.MELT_TABLE, fast.melt_table(), rtol=1e-13, atol=0.0)
+
+
 # Tolerance against the full model: the measured test-set error of the tier
 # (results/benchmarks/fast_tier.md: p90 ~5 %, the presets themselves within 3 %) plus the full
 # model's own rtol (1 %).

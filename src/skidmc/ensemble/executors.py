@@ -271,7 +271,10 @@ def _mp_context():
         # Modules the server imports once, before forking any worker (no effect once running).
         # Not skidmc.runner itself: `python -m skidmc.runner` re-runs it as the workers' main
         # module, which runpy warns about when it is imported already; its imports are these.
-        ctx.set_forkserver_preload(["__main__", "skidmc.scene", "skidmc.solver"])
+        # The last loads the solver's kernels in the server (its docstring), so that each
+        # worker is forked with them loaded.
+        ctx.set_forkserver_preload(["__main__", "skidmc.scene", "skidmc.solver",
+                                    "skidmc.ensemble._forkserver_warm"])
         return ctx
     return multiprocessing.get_context("spawn")
 

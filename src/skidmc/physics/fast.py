@@ -34,7 +34,8 @@ Model (report equation numbers in parentheses)
               / sqrt(1 - sigma) dsigma,
 
    eta(r) the root of sqrt(pi) ierfc(eta) = r (G(1) = 0, G grows as r falls). G is tabulated
-   once at import (:data:`MELT_TABLE`) and interpolated; the effective surface temperature
+   (:data:`MELT_TABLE`, read from ``skidmc/data/melt_table.txt``, which
+   :func:`melt_table` computes) and interpolated; the effective surface temperature
    T_s,eff = T0 + sqrt(H) Theta - dT_melt replaces T_s in the criterion below. Assumptions:
    the inert (un-melted) profile sets the melt depth (it overestimates s; lambda_melt absorbs
    this), the melt front is treated as at the interface, and the constant-flux similarity is
@@ -87,10 +88,10 @@ Units: SI throughout, temperatures in K, angles in degrees at the public interfa
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
-from scipy.special import erfc
 
 from skidmc.physics.mechanics import (
     EXIT_STOPS_SLIDING,
@@ -118,6 +119,7 @@ __all__ = [
     "fast_height_kernel",
     "fast_heights_kernel",
     "melt_depression",
+    "melt_table",
 ]
 
 #: Number of uniform times in (0, t_exit] on which Theta and the induction integral are taken.
@@ -174,6 +176,8 @@ def _inverse_ierfc(r):
     sqrt(pi) ierfc(eta) = exp(-eta^2) - sqrt(pi) eta erfc(eta) is convex and decreasing, so
     Newton from the left converges monotonically.
     """
+    from scipy.special import erfc
+
     r = np.asarray(r, dtype=float)
     eta = np.zeros_like(r)
     spi = math.sqrt(math.pi)
@@ -199,6 +203,8 @@ def melt_depression(r, n_nodes=48):
     float
         G(r); dT_melt = (L / c1) share G(r) [K] for a constant flux (before MELT_FACTOR).
     """
+    from scipy.special import erfc
+
     if r >= 1.0:
         return 0.0
     rho0 = r * r
@@ -216,8 +222,33 @@ def melt_depression(r, n_nodes=48):
     return float(2.0 / spi * np.sum(2.0 * fprime * wv))
 
 
-#: G(r) on a uniform grid of r in [0, 1] (index i <-> r = i / (len - 1)); G(0) from r = 1e-3.
-MELT_TABLE = np.array([melt_depression(max(r, 1e-3)) for r in np.linspace(0.0, 1.0, 201)])
+#: Points of :data:`MELT_TABLE` [1].
+MELT_TABLE_POINTS = 201
+#: The file that holds :data:`MELT_TABLE` (``float.hex``, one value a line), written by
+#: ``python scripts/make_melt_table.py`` from :func:`melt_table`.
+MELT_TABLE_FILE = Path(__file__).resolve().parent.parent / "data" / "melt_table.txt"
+
+
+def melt_table(points=MELT_TABLE_POINTS):
+    """G(r) on a uniform grid of r in [0, 1] [1] (index i <-> r = i / (points - 1)); G(0) from
+    r = 1e-3. Computed by :func:`melt_depression` (scipy.special's erfc, ~0.1 s)."""
+    return np.array([melt_depression(max(r, 1e-3)) for r in np.linspace(0.0, 1.0, points)])
+
+
+def _read_melt_table(path=MELT_TABLE_FILE):
+    """:data:`MELT_TABLE` as stored: the values :func:`melt_table` computed, bit for bit.
+
+    Stored rather than computed at import, which took scipy.special (~0.15-0.3 s to import)
+    and ~0.1 s of Newton iterations, a quarter of a ``skidmc height`` call
+    (docs/performance.md); ``tests/test_fast.py`` recomputes it.
+    """
+    lines = [line for line in path.read_text().splitlines() if not line.startswith("#")]
+    return np.array([float.fromhex(line) for line in lines])
+
+
+#: G(r) on a uniform grid of r in [0, 1] (index i <-> r = i / (len - 1)); G(0) from r = 1e-3
+#: (:func:`melt_table`).
+MELT_TABLE = _read_melt_table()
 
 
 # --- kernels ------------------------------------------------------------------------------------

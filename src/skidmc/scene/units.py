@@ -33,9 +33,27 @@ __all__ = ["FOOT", "from_si", "read_si", "to_si", "ureg"]
 #: (12 x 0.0254) round to 0.30479999999999996.
 FOOT = 0.3048
 
+
+
+def _registry() -> pint.UnitRegistry:
+    """pint's default registry, its parsed definitions kept in pint's disk cache.
+
+    ``cache_folder=":auto:"`` (pint's own cache, in the user's cache folder, invalidated by
+    pint when its definition files change) builds the registry in ~15 ms instead of ~0.3 s
+    of parsing, a fifth of a ``skidmc height`` call (docs/performance.md). The units are the
+    same (``tests/test_units.py`` compares every preset's value with an uncached registry).
+    Where the cache cannot be used (no writable cache folder, a file another process is
+    writing), the registry is built without it.
+    """
+    try:
+        return pint.UnitRegistry(cache_folder=":auto:")
+    except Exception:  # noqa: BLE001 - only a cache: build the registry as pint does without it
+        return pint.UnitRegistry()
+
+
 #: The package's single unit registry. Offset units are *not* auto-converted in products:
 #: with ``autoconvert_offset_to_baseunit=True`` pint would read ``cal/g/degC`` as per 274.15 K.
-ureg = pint.UnitRegistry()
+ureg = _registry()
 
 # "<number> <unit expression>" with an optional unit part; the number may be nan/inf so that those
 # reach the finiteness check with a clear message rather than failing as a unit.

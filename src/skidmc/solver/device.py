@@ -31,6 +31,10 @@ Where it differs from the CPU search, and why
   reaches below the top layer, and targets whose properties follow a temperature table
   ("temperature_target"; the thread's target has constant properties). The batch front end
   (:func:`skidmc.solver.cuda.cuda_critical_heights`) does this; no sample is lost.
+* Stalled runs: the same cap as the CPU search (:func:`run_cap`, the rule of
+  :func:`skidmc.solver.simulate.stall_cap`: 10x the most step attempts of the search's earlier
+  runs, at least 4,000, 12,500 x 2^level in any case), so a run that stalls hands its scene to
+  the CPU search after a few thousand attempts instead of 200,000.
 """
 
 from __future__ import annotations
@@ -83,7 +87,7 @@ from skidmc.solver.plan import (
 )
 from skidmc.solver.roots import FAST_GUESS_ERROR
 from skidmc.solver.search import MAX_ADAPTIVE_ROUNDS
-from skidmc.solver.simulate import MAX_STEPS
+from skidmc.solver.simulate import MAX_STEPS, STALL_ATTEMPTS_LEVEL0, STALL_FACTOR, STALL_FLOOR
 
 __all__ = [
     "DEVICE_MAX_LEVEL",
@@ -95,6 +99,7 @@ __all__ = [
     "WORK_ROWS",
     "critical_height_core",
     "critical_heights_cpu",
+    "run_cap",
 ]
 
 #: Finest level a device search refines to (its arrays hold 2 * 24 * 2**3 = 384 cells); a pair
@@ -130,9 +135,13 @@ OUT_SIZE = 10
  _TA, _Q, _TG_RHO, _TG_C, _TG_K, _TG_P) = range(19)
 
 # Scalars shared by every level of one scene (the `sc` array).
+# _S_MOST: the most step attempts of a run of the current search at its level (run_cap).
 (_S_OMEGA, _S_T_EXIT, _S_SLIDE_S, _S_SLIDE_C, _S_EXTENSION, _S_T_END, _S_FLUX,
- _S_LATENT, _S_RUNAWAY, _S_SPREAD) = range(10)
-_N_SCALARS = 10
+ _S_LATENT, _S_RUNAWAY, _S_SPREAD, _S_MOST) = range(11)
+_N_SCALARS = 11
+
+#: The base level's step tolerance [K] (a float for the compiled code: run_cap).
+_BASE_TOL_TEMPERATURE = float(BASE_RESOLUTION.tol_temperature)
 
 
 @njit(cache=True)
@@ -147,24 +156,45 @@ def _build_level(row, sc, level, work):
 
 
 @njit(cache=True)
+def run_cap(tol_temperature, most):
+    """Most step attempts [1] of a run at step tolerance ``tol_temperature`` [K] before it
+    counts as stalled, after runs of the same search of at most ``most`` attempts (0: none yet).
+
+    The rule of the CPU search (:func:`skidmc.solver.simulate.stall_cap`, the same constants):
+    :data:`~skidmc.solver.simulate.STALL_ATTEMPTS_LEVEL0` x 2^level, at most ``MAX_STEPS``,
+    and :data:`~skidmc.solver.simulate.STALL_FACTOR` x ``most`` (at least ``STALL_FLOOR``)
+    once the search has run. A stalled run makes the search go to the CPU search, which fails
+    the sample with its reason as fast.
+    """
+    level = max(0.0, math.log2(_BASE_TOL_TEMPERATURE / tol_temperature) / 3.0)
+    cap = int(min(MAX_STEPS, STALL_ATTEMPTS_LEVEL0 * 2.0 ** level))
+    if most > 0:
+        cap = min(cap, max(STALL_FLOOR, STALL_FACTOR * int(most)))
+    return cap
+
+
+@njit(cache=True)
 def _margin(x, row, sc, n_cells, share, tol_temperature, melt_width, work, info):
     """Margin ln(t_ev / t_exit) at H = exp(x) [1], capped at the horizon ln(t_end / t_exit)
-    (no event); NaN when the integration fails (the search then goes to the CPU)."""
+    (no event); NaN when the integration fails or stalls (:func:`run_cap`; the search then
+    goes to the CPU). Updates ``sc[_S_MOST]``, the most attempts of the search's runs."""
+    cap = run_cap(tol_temperature, sc[_S_MOST])
     q0 = sc[_S_FLUX] * math.sqrt(math.exp(x))
     simulate_core(work[_ROW_WIDTH], work[_ROW_RHO_C], work[_ROW_FACE], 2 * n_cells, n_cells,
                   share, row[_HE_RHO], sc[_S_LATENT], row[_HE_TM], melt_width, sc[_S_SPREAD],
                   row[_Z],
                   row[_TA], row[_Q], q0, sc[_S_SLIDE_S], sc[_S_SLIDE_C], sc[_S_OMEGA],
                   sc[_S_T_EXIT], q0 * sc[_S_EXTENSION], sc[_S_T_END], sc[_S_T_END], row[_T0],
-                  tol_temperature, 1e-6 * sc[_S_T_EXIT], sc[_S_RUNAWAY], MAX_STEPS, work[0],
+                  tol_temperature, 1e-6 * sc[_S_T_EXIT], sc[_S_RUNAWAY], cap, work[0],
                   work[0], 0, work[0], work[1], work[2], work[3], work[4], work[5], work[6],
                   work[7], work[8], work[9], work[10], work[11], work[12], work[13], info,
                   0.0, 0.0, work[0], work[0], work[0], work[0], 0.0,  # the meshed target
                   work[0], 0,  # no linear prefix
                   work[0], 0)  # constant target properties (tables go to the CPU search)
     horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
-    if info[INFO_FAILED] > 0.0 or (info[INFO_STEPS] + info[INFO_REJECTED] >= MAX_STEPS
-                                   and not info[INFO_EVENT] > 0.0):
+    attempts = info[INFO_STEPS] + info[INFO_REJECTED]
+    sc[_S_MOST] = max(sc[_S_MOST], attempts)
+    if info[INFO_FAILED] > 0.0 or (attempts >= cap and not info[INFO_EVENT] > 0.0):
         return math.nan
     t_ev = info[INFO_T_EVENT]
     if not (t_ev < math.inf):
@@ -250,6 +280,7 @@ def _search(row, sc, level, melt_width, x_guess, step, x_tol, x_min, x_max, work
     presets it saved nothing and cost the stops-sliding scene (gold) 6 more simulations.
     """
     n_cells, share, tol_temperature = _build_level(row, sc, level, work)
+    sc[_S_MOST] = 0.0   # the stall cap counts this search's runs (run_cap)
     x0 = min(max(x_guess, x_min), x_max)
     f0 = _margin(x0, row, sc, n_cells, share, tol_temperature, melt_width, work, info)
     evaluations = 1
@@ -315,6 +346,7 @@ def _tighten(row, sc, level, melt_width, x_tol, work, info, res):
     if res[1] != CENSOR_NONE:
         return
     n_cells, share, tol_temperature = _build_level(row, sc, level, work)
+    sc[_S_MOST] = 0.0   # a new search at the tighter tolerance, as the CPU search's _tighten
     lo, f_lo, hi, f_hi, n, ok = _brent(res[2], res[3], res[4], res[5], x_tol, row, sc, n_cells,
                                        share, tol_temperature, melt_width, work, info,
                                        MAX_SEARCH_EVALUATIONS)

@@ -639,11 +639,24 @@ def target_property_table(scene):
     text = getattr(scene, "target_table", "")
     if not text:
         return None
+    return _scaled_table(text, scene.target_conductivity, scene.target_heat_capacity)
+
+
+@functools.lru_cache(maxsize=256)
+def _scaled_table(text, conductivity, heat_capacity):
+    """:func:`target_property_table` of a table's text and the scene's k, c [read-only arrays].
+
+    Kept: one search builds its scene's model ~5 times per height and parsed the table text
+    each time (~10 % of a height on the temperature-dependent targets; docs/performance.md).
+    The arrays are the same computation's, read-only so that no caller can change the cache.
+    """
     reference, rows = parse_table(text)
     t, k, c = (np.array(col, dtype=float) for col in zip(*rows))
     k_ref, c_ref = np.interp(reference, t, k), np.interp(reference, t, c)
-    return (t, k * (scene.target_conductivity / k_ref),
-            c * (scene.target_heat_capacity / c_ref))
+    out = (t, k * (conductivity / k_ref), c * (heat_capacity / c_ref))
+    for array in out:
+        array.setflags(write=False)
+    return out
 
 
 def target_temperature_range(initial_temperature, runaway_temperature):

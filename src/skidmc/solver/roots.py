@@ -11,8 +11,6 @@ from __future__ import annotations
 import math
 from statistics import NormalDist
 
-from scipy.optimize import brentq
-
 from skidmc.solver.simulate import SolverError
 
 __all__ = [
@@ -442,6 +440,8 @@ def brent_root(margin, x_min, x_max, x_tol, horizon, h_guess, overshoot=0.05):
         # Brent needs finite values; "no event within the horizon" means m > horizon.
         m = margin(xx)
         return m if math.isfinite(m) else 2.0 * horizon + 1.0
+
+    from scipy.optimize import brentq  # here: importing scipy.optimize takes ~0.2-0.4 s
 
     x_root = brentq(bounded, lo, hi, xtol=x_tol, rtol=4 * _EPS)
     return x_root, None
