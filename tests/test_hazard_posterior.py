@@ -5,6 +5,7 @@ matches its closed form at every posterior draw."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from pathlib import Path
@@ -213,3 +214,30 @@ def test_shipped_posterior_study_reads_the_stored_posterior(monkeypatch):
         # 550 K in both studies: no conversion of the rate's reference temperature.
         np.testing.assert_allclose(post.draws[key], flat[post.indices], rtol=1e-12)
     assert post.draws[Q].size == study.estimator.epistemic_draws
+
+
+def test_calibration_report_states_the_hazard_under_its_posterior(tmp_path, monkeypatch):
+    from skidmc.workflows.calibration_report import _hazard_section
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "studies").mkdir()
+    (tmp_path / "studies" / "cal.toml").write_text('[study]\nname = "cal"\n')
+    (tmp_path / "studies" / "hz.toml").write_text(
+        '[hazard]\nname = "hz"\n[hazard.posterior]\ncalibration = "cal.toml"\n')
+    posterior = tmp_path / "posterior.nc"
+    posterior.write_bytes(b"a posterior")
+    attrs = {"study_file": "studies/cal.toml"}
+    text = "\n".join(_hazard_section(posterior, attrs))
+    assert "not run yet" in text and "skidmc run studies/hz.toml --force" in text
+    summary = tmp_path / "results" / "hz" / "summary.json"
+    summary.parent.mkdir(parents=True)
+    post = {"sha256": hashlib.sha256(b"a posterior").hexdigest(), "keys": [Q], "draws": 20,
+            "probability": 1.23e-5, "interval": [1e-5, 1.5e-5], "band": [2e-6, 4e-5],
+            "prior": {"pooled": {"probability": 2.0e-5, "interval": [1.8e-5, 2.2e-5]},
+                      "study": {"status": "found", "band": [1.4e-6, 5.84e-5]}}}
+    summary.write_text(json.dumps({"posterior": post}))
+    text = "\n".join(_hazard_section(posterior, attrs))
+    assert "| under this posterior (mean over its draws) | 1.23e-05 | [1e-05, 1.5e-05] |" in text
+    assert "[1.4e-06, 5.84e-05]" in text and "not carried to the hazard's floors" in text
+    posterior.write_bytes(b"the posterior rerun")  # the hazard's summary is of the old one
+    assert "computed from another posterior" in "\n".join(_hazard_section(posterior, attrs))

@@ -343,7 +343,10 @@ def _posterior_section(r, study: HazardStudy) -> list[str]:
                 f"{corr['posterior'][i][j]:+.2f} / {corr['draws'][i][j]:+.2f}"
                 for j in range(len(keys))) + " |")
     lines += ["", "The posterior's other parameters, not used by this study:", ""]
-    lines += [f"- `{name}`: {why}" for name, why in post["unused"].items()] or ["- none"]
+    reasons: dict[str, list[str]] = {}
+    for name, why in post["unused"].items():
+        reasons.setdefault(why, []).append(f"`{name}`")
+    lines += [f"- {', '.join(names)}: {why}" for why, names in reasons.items()] or ["- none"]
     lines += ["", "Below, the per-surface table, the geometry and angle alternatives, the design "
               "point and the importance are the pooled estimate over the priors; the epistemic "
               "bands (fragility, angle scales) are over the posterior draws.", ""]
