@@ -371,7 +371,9 @@ def _figures(r, study: HazardStudy, out: Path) -> list[Path]:
                                  else "kinetics draws (kinetics only)"))
     z = float(stats.norm.isf((1 - r.confidence) / 2))
     ax.errorbar(m, p, yerr=z * c * p, fmt="o-", color="C0", capsize=3,
-                label=f"all inputs sampled, {level(r.confidence)} sampling interval")
+                label=("all inputs sampled" + (", the kinetics from their priors"
+                                               if getattr(r, "posterior", None) else "")
+                       + f", {level(r.confidence)} sampling interval"))
     ax.axvline(float(study.drop_height.frozen.median()), color="grey", ls=":",
                label="study median")
     ax.set_xscale("log")
