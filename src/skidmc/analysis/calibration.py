@@ -522,6 +522,35 @@ class CalibrationModel:
 # --- sampling and diagnostics -------------------------------------------------------------------
 
 
+def _snooker_move():
+    """emcee's differential-evolution snooker move (Ter Braak and Vrugt 2008) with its
+    proposal corrected as in emcee's pull request #531 (merged 2024-12-20, in no release up to
+    3.1.6): the unit vector along x - z is (x - z) / |x - z| (3.1.6 divides by |x - z|^(1/2))
+    and the Metropolis correction is (ndim - 1) ln(|x' - z| / |x - z|) (3.1.6 halves it).
+    3.1.6's move leaves the posterior's spread about 5 % too narrow (a 2-parameter grid check
+    of the calibration: docs/calibration.md, "Validation")."""
+    import emcee
+
+    class SnookerMove(emcee.moves.DESnookerMove):
+        def get_proposal(self, s, c, random):
+            ns, ndim = s.shape
+            nc = list(map(len, c))
+            q = np.empty_like(s)
+            metropolis = np.empty(ns, dtype=np.float64)
+            for i in range(ns):
+                w = np.array([c[j][random.randint(nc[j])] for j in range(3)])
+                random.shuffle(w)
+                z, z1, z2 = w
+                delta = s[i] - z
+                norm = np.linalg.norm(delta)
+                u = delta / norm
+                q[i] = s[i] + u * self.gammas * (np.dot(u, z1) - np.dot(u, z2))
+                metropolis[i] = np.log(np.linalg.norm(q[i] - z)) - np.log(norm)
+            return q, (ndim - 1.0) * metropolis
+
+    return SnookerMove()
+
+
 def run_emcee(log_prob: Callable[[np.ndarray], np.ndarray], ndim: int, *, walkers: int,
               burn: int, steps: int, thin: int, seed: int, initial: np.ndarray | None = None,
               progress: Callable[[int, int], None] | None = None):
@@ -543,7 +572,7 @@ def run_emcee(log_prob: Callable[[np.ndarray], np.ndarray], ndim: int, *, walker
     # correlated posteriors: on the shipped calibration's 17 parameters their integrated
     # autocorrelation time was 53 steps (median; 65 largest) against 160 (194) for emcee's
     # default stretch move, measured over 5000 steps of 48 walkers (docs/calibration.md).
-    moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+    moves = [(emcee.moves.DEMove(), 0.8), (_snooker_move(), 0.2)]
     sampler = emcee.EnsembleSampler(walkers, ndim, log_prob, vectorize=True, moves=moves)
     sampler._random = np.random.mtrand.RandomState(seed)  # emcee's own RNG, seeded
     state = p0
@@ -805,38 +834,82 @@ def simulate_drops(model: CalibrationModel, z_true: np.ndarray,
     return dataclasses.replace(model, targets=tuple(targets))
 
 
-def sbc_ranks(model: CalibrationModel, replications: int, *, draws: int, walkers: int,
-              burn: int, steps: int, seed: int,
-              progress: Callable[[int], None] | None = None) -> np.ndarray:
+#: How :func:`sbc_ranks` picks the posterior draws a truth is ranked among: ``separated``,
+#: whole ensembles at ceil(draws / walkers) steps spaced steps / k apart (the walkers of one
+#: step are independent draws of a converged ensemble, and steps 200 apart at the shipped
+#: settings are 6 autocorrelation times of 31 steps apart: Talts et al.'s thinning to
+#: independent draws); ``spread``, the earlier choice, draws evenly spaced over the chain in
+#: time order (consecutive picks 6 steps apart in neighbouring walkers, so correlated: that
+#: piles ranks at the ends, Talts et al. Sec. 5.1).
+SBC_PICKS = ("separated", "spread")
+
+
+def _sbc_pick(chain: np.ndarray, draws: int, pick: str) -> np.ndarray:
+    """`draws` posterior draws (draws, ndim) out of a chain (walkers, steps, ndim)."""
+    walkers, steps, ndim = chain.shape
+    if pick == "spread":
+        flat = np.swapaxes(chain, 0, 1).reshape(-1, ndim)  # steps x walkers, in time order
+        return flat[np.linspace(0, len(flat) - 1, draws).astype(int)]
+    if pick == "separated":
+        k = -(-draws // walkers)  # ensembles needed
+        if k > steps:
+            raise ValueError(f"draws = {draws}: more than walkers x steps = {walkers * steps}")
+        at = (np.arange(1, k + 1) * steps) // k - 1  # steps/k apart, ending at the last
+        per = -(-draws // k)  # walkers per ensemble
+        return chain[:per][:, at, :].reshape(-1, ndim)[:draws]
+    raise ValueError(f"pick = {pick!r}: expected one of {', '.join(SBC_PICKS)}")
+
+
+def sbc_rank_sets(model: CalibrationModel, replications: int, *, draws: int, walkers: int,
+                  burn: int, steps: int, seed: int, picks: Sequence[str] = ("separated",),
+                  progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
     """Simulation-based calibration (Talts et al. 2018): for each replication, normal scores
     drawn from the prior, drops simulated by the model (:func:`simulate_drops`), the posterior
-    sampled by :func:`run_emcee`, and the rank of each true score among `draws` posterior draws
-    evenly spaced over the kept chain (thinned below the autocorrelation).
+    sampled by :func:`run_emcee`, and the rank of each true score among `draws` posterior
+    draws taken from the kept chain in each way of `picks` (:data:`SBC_PICKS`), all from the
+    same chains.
 
     The model's prior must be what it samples from: N(0, 1) per score, so a model with a
     friction population (a further factor on the scores) is refused.
 
     Returns
     -------
-    ndarray (replications, ndim) of int
-        Ranks in 0..`draws`; uniform when the sampler and likelihood are right.
+    dict
+        Pick -> ndarray (replications, ndim) of int, ranks in 0..`draws`; uniform when the
+        sampler and likelihood are right and the draws independent.
     """
     if model.population is not None:
         raise ValueError("sbc_ranks: the model's prior must be N(0, 1) per score (no friction "
                          "population): build it with population=None")
+    for pick in picks:
+        if pick not in SBC_PICKS:
+            raise ValueError(f"pick = {pick!r}: expected one of {', '.join(SBC_PICKS)}")
     rng = np.random.default_rng(seed)
-    ranks = np.zeros((replications, model.ndim), dtype=int)
+    ranks = {pick: np.zeros((replications, model.ndim), dtype=int) for pick in picks}
     for r in range(replications):
         z_true = rng.standard_normal(model.ndim)
         sim = simulate_drops(model, z_true, rng)
         chain, _lnp, _acc = run_emcee(sim.log_posterior, sim.ndim, walkers=walkers, burn=burn,
                                       steps=steps, thin=1, seed=int(rng.integers(2**31)))
-        flat = np.swapaxes(chain, 0, 1).reshape(-1, sim.ndim)  # steps x walkers, in time order
-        pick = flat[np.linspace(0, len(flat) - 1, draws).astype(int)]
-        ranks[r] = (pick < z_true[None, :]).sum(axis=0)
+        for pick in picks:
+            ranks[pick][r] = (_sbc_pick(chain, draws, pick) < z_true[None, :]).sum(axis=0)
         if progress is not None:
             progress(r + 1)
     return ranks
+
+
+def sbc_ranks(model: CalibrationModel, replications: int, *, draws: int, walkers: int,
+              burn: int, steps: int, seed: int, pick: str = "separated",
+              progress: Callable[[int], None] | None = None) -> np.ndarray:
+    """The ranks of :func:`sbc_rank_sets` for one way of picking the draws (`pick`).
+
+    Returns
+    -------
+    ndarray (replications, ndim) of int
+        Ranks in 0..`draws`; uniform when the sampler and likelihood are right.
+    """
+    return sbc_rank_sets(model, replications, draws=draws, walkers=walkers, burn=burn,
+                         steps=steps, seed=seed, picks=(pick,), progress=progress)[pick]
 
 
 def rank_uniformity(ranks: np.ndarray, draws: int, bins: int = 10) -> dict:

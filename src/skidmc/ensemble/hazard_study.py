@@ -75,6 +75,11 @@ table, so that a file is recognised by it; :func:`is_hazard_study`)::
     rtol = 1e-2
     tier = "full"
 
+    [hazard.posterior]                  # optional: the epistemic loop's draws taken from a
+    calibration = "calibration-series1.toml"  # calibration's stored posterior (or a .nc),
+    prior_study = "hazard-handling.toml"      # beside the same study over the priors
+                                        # (skidmc.workflows.hazard_posterior)
+
 Distributions follow the rules of :mod:`skidmc.ensemble.study`: scipy's parameter names, values
 with units where the key has units (a bare number is read in SI and refused where implausible),
 ``relative = true`` for a factor on the scene's value, a ``source`` on every one, and the

@@ -529,6 +529,13 @@ class HazardStudy:
     angle_alternatives : tuple of Distribution
         The angle distribution at other scales (``[hazard.alternatives] angle_scales``): P at
         each from the same samples, reweighted.
+    posterior : str or None
+        ``[hazard.posterior] calibration``, as written: a calibration study file or a
+        posterior.nc (relative to `file`) whose stored draws replace the epistemic loop's
+        Latin-hypercube draws (:mod:`skidmc.workflows.hazard_posterior`); None: the priors.
+    prior_study : str or None
+        ``[hazard.posterior] prior_study``, as written: the same study over the priors, whose
+        summary gives the prior's epistemic band beside the posterior's.
     """
 
     name: str
@@ -547,6 +554,8 @@ class HazardStudy:
     assumptions: tuple[str, ...] = ()
     alternative_configuration: str | None = None
     angle_alternatives: tuple[Distribution, ...] = ()
+    posterior: str | None = None
+    prior_study: str | None = None
 
     @property
     def modelled_surfaces(self) -> tuple[Surface, ...]:

@@ -1215,6 +1215,24 @@ class EstimatorSpec(_Table):
             "epistemic_target_cov")})
 
 
+_POSTERIOR_FILE = ("expected a calibration study file (its posterior is results/<name>/"
+                   "posterior.nc) or an ArviZ posterior file (.nc), relative to this file")
+
+
+class PosteriorSpec(_Table):
+    """``[hazard.posterior]``: the epistemic draws taken from a calibration's posterior.
+
+    The epistemic loop's draws of the ``[hazard.epistemic]`` inputs are then equally spaced
+    thinned draws of the stored posterior (joint, so their correlation is kept) instead of
+    Latin-hypercube draws of the priors; the pooled estimate stays over the priors."""
+
+    MISSING = {"calibration": "missing: " + _POSTERIOR_FILE}
+    calibration: Annotated[str, _string(_POSTERIOR_FILE)] = Field(min_length=1)
+    #: The same study over the priors: its summary.json gives the prior's epistemic band.
+    prior_study: Annotated[str, _string("expected the hazard study file over the priors "
+                                        "(relative to this file)")] | None = None
+
+
 class HazardTable(_Table):
     """``[hazard]``: the population of handling accidents."""
 
@@ -1243,6 +1261,7 @@ class HazardTable(_Table):
     solver: SolverSpec = SolverSpec()
     assumptions: Annotated[list[str], BeforeValidator(_sentences)] = []
     alternatives: AlternativesSpec = AlternativesSpec()
+    posterior: PosteriorSpec | None = None
 
 
 class HazardFile(_Table):
@@ -1309,6 +1328,17 @@ class HazardFile(_Table):
             assumptions=tuple(v.strip() for v in h.assumptions),
             alternative_configuration=alternatives.configuration,
             angle_alternatives=tuple(angles))
+        if h.posterior is not None:
+            if not epistemic:
+                raise _Problem("there is no [hazard.epistemic] input to take from a posterior",
+                               "hazard", "posterior", "calibration",
+                               value=h.posterior.calibration)
+            if not h.estimator.epistemic_draws:
+                raise _Problem("a posterior's draws need epistemic_draws >= 1", "hazard",
+                               "estimator", "epistemic_draws",
+                               value=h.estimator.epistemic_draws)
+            self._parts.update(posterior=h.posterior.calibration,
+                               prior_study=h.posterior.prior_study)
         return self
 
     def build(self, text: str, file: str) -> HazardStudy:

@@ -335,6 +335,7 @@ def write_calibration_report(path: Path, out: Path) -> list[str]:
              for j in range(i + 1, len(names)) if abs(rho[i, j]) >= 0.3]
     md += [f"- {a} and {b}: {r:+.2f}" for a, b, r in sorted(pairs, key=lambda x: -abs(x[2]))]
     md += (["- none"] if not pairs else []) + ["", "![correlations](correlations.png)", ""]
+    md += _hazard_section(path, attrs)
     md += ["## Numerical checks", "",
            "| target | surrogate keys | rmse ln H_c training | held out | at posterior draws "
            "(solver) | largest there | folded aleatory sd |", "|---|---|---|---|---|---|---|"]
@@ -356,6 +357,71 @@ def write_calibration_report(path: Path, out: Path) -> list[str]:
            "noisy).", ""]
     (out / "summary.md").write_text("\n".join(md) + "\n")
     return printed
+
+
+def _hazard_studies(attrs) -> list[Path]:
+    """Hazard study files beside the calibration study whose ``[hazard.posterior]`` names it."""
+    import tomllib
+
+    file = Path(attrs.get("study_file", ""))
+    if not file.is_file():
+        return []
+    found = []
+    for candidate in sorted(file.parent.glob("*.toml")):
+        try:
+            doc = tomllib.loads(candidate.read_text(encoding="utf-8"))
+            named = doc["hazard"]["posterior"]["calibration"]
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, KeyError, TypeError):
+            continue
+        if (candidate.parent / named).resolve() == file.resolve():
+            found.append(candidate)
+    return found
+
+
+def _hazard_section(path: Path, attrs) -> list[str]:
+    """What the posterior does to the handling hazard: the summary of each hazard study that
+    takes its draws from this posterior (``[hazard.posterior]``), or the command that makes it."""
+    import hashlib
+
+    import tomllib
+
+    md = ["## What the posterior does to the handling hazard", ""]
+    studies = _hazard_studies(attrs)
+    if not studies:
+        return md + ["No hazard study beside this calibration's study names it in "
+                     "`[hazard.posterior]` (docs/rare-events.md, \"The handling study under a "
+                     "calibration's posterior\").", ""]
+    sha = hashlib.sha256(path.read_bytes()).hexdigest()
+    for study in studies:
+        name = tomllib.loads(study.read_text(encoding="utf-8"))["hazard"]["name"]
+        summary = Path("results") / name / "summary.json"
+        command = f"`skidmc run {study} --force`"
+        try:
+            data = json.loads(summary.read_text(encoding="utf-8"))
+            post = data["posterior"]
+        except (OSError, ValueError, KeyError):
+            md += [f"- `{study.name}`: not run yet; {command} computes it (about 20 minutes "
+                   f"on two cores) and writes `{summary}`, which this report then reads.", ""]
+            continue
+        if post.get("sha256") != sha:
+            md += [f"- `{study.name}`: `{summary}` was computed from another posterior than "
+                   f"this one; {command} recomputes it.", ""]
+            continue
+        prior, pooled = post["prior"]["study"], post["prior"]["pooled"]
+        lo, hi = post["interval"]
+        prior_band = (f"[{prior['band'][0]:.3g}, {prior['band'][1]:.3g}]"
+                      if prior.get("status") == "found" else prior.get("status", "?"))
+        md += [f"From `{summary}` (`{study.name}`: the hazard with its epistemic inputs, "
+               f"{', '.join(post['keys'])}, held at {post['draws']} equally spaced draws of "
+               "this posterior; the model discrepancy, a factor on the report's targets' H_c, "
+               "is not carried to the hazard's floors):", "",
+               "| P per accident | mean | 95 % interval | epistemic 5-95 % |",
+               "|---|---|---|---|",
+               f"| over the priors (pooled) | {pooled['probability']:.3g} | "
+               f"[{pooled['interval'][0]:.3g}, {pooled['interval'][1]:.3g}] | {prior_band} |",
+               f"| under this posterior (mean over its draws) | {post['probability']:.3g} | "
+               f"[{lo:.3g}, {hi:.3g}] | [{post['band'][0]:.3g}, {post['band'][1]:.3g}] |", ""]
+    return md
 
 
 def _assumptions(summary, attrs) -> list[str]:

@@ -252,6 +252,16 @@ class HazardResult:
     rerun_rule : dict
         When P at another angle scale was rerun: ``cov`` (:data:`RERUN_COV`), ``uncovered``
         (:data:`RERUN_UNCOVERED`), ``angle_max_deg`` (:data:`ANGLE_MAX`).
+    posterior : dict
+        Empty over the priors. With ``[hazard.posterior]`` (the epistemic draws taken from a
+        calibration's posterior, :mod:`skidmc.workflows.hazard_posterior`): ``probability``
+        (the mean of `epistemic_probabilities` over the posterior draws), ``se``, ``cov``,
+        ``interval`` [1]; ``band`` (= `band`); ``prior`` (the pooled P over the priors, its
+        interval, and the prior study's band where its summary is found); ``spread`` (input
+        -> 5/50/95 % of the hazard's prior, the calibration's prior draws, the posterior and
+        the draws taken [SI]); ``correlation`` (Spearman, of all stored draws and of those
+        taken); ``unused`` (the posterior's other parameters -> why); the file, its sha256,
+        the draws' indices.
     files : tuple of str
         Files written.
     """
@@ -284,6 +294,7 @@ class HazardResult:
     design_medians: dict = dataclasses.field(default_factory=dict)
     rerun_rule: dict = dataclasses.field(default_factory=dict)
     files: tuple[str, ...] = ()
+    posterior: dict = dataclasses.field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """Plain JSON-ready data (arrays as lists)."""
@@ -293,6 +304,8 @@ class HazardResult:
         out["epistemic_covs"] = self.epistemic_covs.tolist()
         out["epistemic_draws"] = {k: np.asarray(v).tolist()
                                   for k, v in self.epistemic_draws.items()}
+        if not self.posterior:  # a study over the priors: its summary.json as before
+            out.pop("posterior")
         from skidmc.workflows.reporting import json_ready
 
         return json_ready(out)
@@ -608,6 +621,11 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
     seeds = np.random.SeedSequence(options.seed)
     pooled_seeds, outer_seeds, design_seed = seeds.spawn(3)
     notes: list[str] = []
+    post = None
+    if study.posterior is not None:  # refused here, before any solver run, if unreadable
+        from skidmc.workflows.hazard_posterior import read_posterior
+
+        post = read_posterior(study)
 
     # pooled: aleatory and epistemic inputs together, one estimate per surface
     # (a surface outside the model is not run: its weight is reported, not taken as no reaction)
@@ -643,7 +661,8 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
     outer: list[list[tuple[float, DropHeightResult]]] = []
     outer_p, outer_cov = [], []
     if study.epistemic and options.epistemic_draws:
-        draws = _epistemic_draws(study, options.epistemic_draws, design_seed)
+        draws = (dict(post.draws) if post is not None else
+                 _epistemic_draws(study, options.epistemic_draws, design_seed))
         for j, child in enumerate(outer_seeds.spawn(options.epistemic_draws)):
             fixed = {k: float(v[j]) for k, v in draws.items()}
             parts, variance = [], 0.0
@@ -721,6 +740,13 @@ def run_hazard_study(study: HazardStudy | str | Path, out_dir: str | Path | None
         rerun_rule={"cov": RERUN_COV, "uncovered": RERUN_UNCOVERED, "angle_max_deg": ANGLE_MAX},
     )
     result = dataclasses.replace(result, surfaces=all_surfaces)
+    if post is not None:
+        from skidmc.workflows.hazard_posterior import posterior_summary
+
+        result = dataclasses.replace(result, posterior=posterior_summary(
+            study, post, result, _marginals(study, study.surfaces[0], post.keys)))
+        say(f"posterior ({post.calibration}): P = {result.posterior['probability']:.3g}, "
+            f"{BAND[0]:.0%}-{BAND[1]:.0%} band [{band[0]:.3g}, {band[1]:.3g}]")
     if recorder is not None and not replay_only:
         log.complete(recorder.calls)
     if out_dir is not None:
@@ -748,8 +774,17 @@ def detect(doc: dict) -> bool:
 
 
 def load(path) -> HazardStudy:
-    """The validated hazard study."""
-    return load_hazard_study(path)
+    """The validated hazard study; with ``[hazard.posterior]``, its posterior read (refused
+    here if missing or lacking an input) and its file's hash made part of the study's."""
+    return _posterior_identity(load_hazard_study(path))
+
+
+def _posterior_identity(study: HazardStudy) -> HazardStudy:
+    if study.posterior is None:
+        return study
+    from skidmc.workflows.hazard_posterior import read_posterior, with_posterior_sha
+
+    return with_posterior_sha(study, read_posterior(study))
 
 
 def default_out(study: HazardStudy) -> Path:
@@ -830,6 +865,12 @@ def run(study: HazardStudy, options):
         f"skidmc run: P(reaction per accident) = {result.probability:.3g} [{low:.3g}, "
         f"{high:.3g}] ({CONFIDENCE * 100:g} %), {result.runs['total']} solver runs; "
         f"{folder / 'summary.md'}",)
+    if result.posterior and not options.quiet:
+        p = result.posterior
+        lines += (f"skidmc run: under the posterior of {p['calibration']}: P = "
+                  f"{p['probability']:.3g} [{p['interval'][0]:.3g}, {p['interval'][1]:.3g}] "
+                  f"({CONFIDENCE * 100:g} %, {p['draws']} posterior draws); the line above is "
+                  "over the priors",)
     return Outcome(0, folder / "summary.md", lines)
 
 
@@ -843,7 +884,7 @@ def report(target, options):
         from skidmc.workflows.registry import study_of_result
 
         file = EvaluationLog(target, {}).info().get("study_file") or str(target)
-        study = load_hazard_study_text(study_of_result(target), file)
+        study = _posterior_identity(load_hazard_study_text(study_of_result(target), file))
         path = target
     else:
         study = target

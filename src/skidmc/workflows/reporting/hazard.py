@@ -106,7 +106,18 @@ def _markdown(r, study: HazardStudy) -> str:
             f"it would be P / (1 - {r.unmodelled_weight:.3g}) = {r.conditional_modelled:.3g} "
             "(P(reaction | a modelled surface)); that is a judgement, not a result.",
         ]
-    if r.epistemic_probabilities.size:
+    post = getattr(r, "posterior", None) or {}
+    if r.epistemic_probabilities.size and post:
+        e = r.epistemic_probabilities
+        lines.append(
+            f"- Epistemic band **under the posterior** of `{post['calibration']}` (the "
+            f"epistemic inputs held at each of {e.size} draws of it): {qs} [{r.band[0]:.3g}, "
+            f"{r.band[1]:.3g}], median {np.median(e):.3g}; their mean, **P = "
+            f"{post['probability']:.3g}** per accident, {ci} interval "
+            f"[{post['interval'][0]:.3g}, {post['interval'][1]:.3g}] (over the draws), is "
+            "the posterior's P (the pooled P above is over the priors: see \"Prior against "
+            f"posterior\"); draws' own CoV at most {np.max(r.epistemic_covs):.2f}.")
+    elif r.epistemic_probabilities.size:
         e = r.epistemic_probabilities
         lines.append(
             f"- Epistemic band (kinetics held at each of {e.size} Latin-hypercube draws): "
@@ -122,6 +133,7 @@ def _markdown(r, study: HazardStudy) -> str:
         f"{study.solver.rtol:g} on every H_c would move P by about "
         f"{r.elasticity * study.solver.rtol:.0%}.",
         "",
+        *(_posterior_section(r, study) if post else []),
         "## Per surface (pooled)",
         "",
         "| surface | regime | weight | P(reaction given surface) | share of P per accident | "
@@ -223,7 +235,9 @@ def _markdown(r, study: HazardStudy) -> str:
               "The same H_c samples reweighted (no extra solver run); the band from the "
               f"epistemic draws' samples: it covers the kinetics inputs only "
               f"({', '.join(study.epistemic_keys) or 'none'}; "
-              f"{study.estimator.epistemic_draws} draws), every other input averaged within "
+              f"{study.estimator.epistemic_draws} draws"
+              + (f" of the posterior of `{post['calibration']}`" if post else "")
+              + "), every other input averaged within "
               "each draw.", "",
               f"| median drop height | P per accident | CoV | epistemic {q_low} | epistemic "
               f"{q_high} |",
@@ -263,6 +277,82 @@ def _markdown(r, study: HazardStudy) -> str:
     return "\n".join(lines)
 
 
+def _posterior_section(r, study: HazardStudy) -> list[str]:
+    """Prior against posterior: P and its band under both, the inputs' spread, what the
+    posterior's other parameters are and why the hazard does not use them."""
+    post = r.posterior
+    ci, qs = level(r.confidence), band(r.band_quantiles)
+    prior, pooled = post["prior"]["study"], post["prior"]["pooled"]
+    lo, hi = post["interval"]
+    found = prior.get("status") == "found"
+    if found:
+        prior_band = (f"[{prior['band'][0]:.3g}, {prior['band'][1]:.3g}] "
+                      f"({len(prior['epistemic_probabilities'])} Latin-hypercube draws of the "
+                      f"priors, from `{Path(prior['file']).name}`'s summary)")
+        check = (f"; that study's pooled P: {prior['probability']:.3g} "
+                 f"[{prior['interval'][0]:.3g}, {prior['interval'][1]:.3g}]")
+    else:
+        prior_band = f"not available: {prior['status']}"
+        check = ""
+    lines = [
+        "## Prior against posterior",
+        "",
+        f"The epistemic inputs ({', '.join(f'`{k}`' for k in post['keys'])}) are taken from "
+        f"the posterior of the calibration `{post['calibration']}` (`{post['file']}`, "
+        f"sha256 {post['sha256'][:12]}, completed {post['completed'] or '?'}): "
+        f"{post['draws']} of its {post['stored']} stored draws, equally spaced over the "
+        "flattened (chain, draw) order, each a whole row of the posterior (their joint "
+        "distribution, correlation included, kept). Every other input is as in the study "
+        "over the priors. P under the posterior is the mean of P over these draws, its "
+        f"{ci} interval a Student-t one over the {post['draws']} draws (it holds the spread "
+        "between draws and each draw's own sampling error); P over the priors is the pooled "
+        "estimate of this run (same seed as the study over the priors" + check + ").",
+        "",
+        f"| | P per accident | {ci} interval | epistemic {qs} |",
+        "|---|---|---|---|",
+        f"| prior | {pooled['probability']:.3g} | [{pooled['interval'][0]:.3g}, "
+        f"{pooled['interval'][1]:.3g}] (pooled) | {prior_band} |",
+        *([f"| prior, mean of its {prior['draws_mean']['n']} draws (as the posterior's) | "
+           f"{prior['draws_mean']['probability']:.3g} | "
+           f"[{prior['draws_mean']['interval'][0]:.3g}, "
+           f"{prior['draws_mean']['interval'][1]:.3g}] (over its draws) | as above |"]
+          if found else []),
+        f"| posterior (`{post['calibration']}`) | {post['probability']:.3g} | "
+        f"[{lo:.3g}, {hi:.3g}] (over {post['draws']} draws) | [{post['band'][0]:.3g}, "
+        f"{post['band'][1]:.3g}] ({post['draws']} posterior draws) |",
+        "",
+        "Spread of each input (" + "-".join(f"{q * 100:g}" for q in post["spread_quantiles"])
+        + " % quantiles): the hazard study's prior, the calibration's prior (its stored prior "
+        "draws), the calibration's posterior (every stored draw) and the draws taken here.",
+        "",
+        "| input | hazard prior | calibration prior | posterior | draws taken |",
+        "|---|---|---|---|---|",
+    ]
+    for key, sp in post["spread"].items():
+        cells = [" / ".join(_shown(key, v) for v in sp[part]) if sp[part] else "not stored"
+                 for part in ("hazard_prior", "calibration_prior", "posterior", "draws")]
+        lines.append(f"| `{key}` | " + " | ".join(cells) + " |")
+    corr = post["correlation"]
+    keys = corr["keys"]
+    if len(keys) > 1:
+        lines += ["", "Rank (Spearman) correlation of the inputs: posterior (every stored draw) "
+                  "/ the draws taken.", "", "| | " + " | ".join(f"`{k}`" for k in keys) + " |",
+                  "|---|" + "---|" * len(keys)]
+        for i, k in enumerate(keys):
+            lines.append(f"| `{k}` | " + " | ".join(
+                f"{corr['posterior'][i][j]:+.2f} / {corr['draws'][i][j]:+.2f}"
+                for j in range(len(keys))) + " |")
+    lines += ["", "The posterior's other parameters, not used by this study:", ""]
+    reasons: dict[str, list[str]] = {}
+    for name, why in post["unused"].items():
+        reasons.setdefault(why, []).append(f"`{name}`")
+    lines += [f"- {', '.join(names)}: {why}" for why, names in reasons.items()] or ["- none"]
+    lines += ["", "Below, the per-surface table, the geometry and angle alternatives, the design "
+              "point and the importance are the pooled estimate over the priors; the epistemic "
+              "bands (fragility, angle scales) are over the posterior draws.", ""]
+    return lines
+
+
 def _figures(r, study: HazardStudy, out: Path) -> list[Path]:
     plt = pyplot("hazard figures")
     if plt is None:  # pragma: no cover - matplotlib is in the figures extra
@@ -277,11 +367,13 @@ def _figures(r, study: HazardStudy, out: Path) -> list[Path]:
     if np.isfinite(f["band_low"]).all():
         ax.fill_between(m, f["band_low"], f["band_high"], color="C0", alpha=0.2,
                         label=f"{band(r.band_quantiles)} over {study.estimator.epistemic_draws} "
-                              "kinetics draws "
-                              "(kinetics only)")
+                              + ("posterior draws of the kinetics" if getattr(r, "posterior", None)
+                                 else "kinetics draws (kinetics only)"))
     z = float(stats.norm.isf((1 - r.confidence) / 2))
     ax.errorbar(m, p, yerr=z * c * p, fmt="o-", color="C0", capsize=3,
-                label=f"all inputs sampled, {level(r.confidence)} sampling interval")
+                label=("all inputs sampled" + (", the kinetics from their priors"
+                                               if getattr(r, "posterior", None) else "")
+                       + f", {level(r.confidence)} sampling interval"))
     ax.axvline(float(study.drop_height.frozen.median()), color="grey", ls=":",
                label="study median")
     ax.set_xscale("log")
