@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy import stats
 from test_report import SIGMA, _ensemble
+from test_workflows import _plain
 
 from skidmc.analysis.report import EPISTEMIC_BAND, analyse_scene
 from skidmc.workflows.reporting import band, dumps, json_ready, level, log_name
@@ -124,21 +125,7 @@ def test_the_studys_own_assumptions_are_printed_as_written(tmp_path):
 def test_a_study_refuses_assumptions_that_are_not_sentences(tmp_path):
     from skidmc.ensemble.study import StudyError, load_study
 
-    text = """[study]
-name = "k"
-assumptions = "one string, not a list"
-[scene]
-preset = "paper-quartz"
-[uncertain.mu]
-distribution = "uniform"
-loc = 0.08
-scale = 0.06
-source = "test"
-[design]
-method = "mc"
-n = 8
-seed = 1
-"""
+    text = _plain(extra_study='assumptions = "one string, not a list"')
     path = tmp_path / "k.toml"
     path.write_text(text)
     with pytest.raises(StudyError, match=r"study\.assumptions.*one string, not a list"):

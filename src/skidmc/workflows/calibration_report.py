@@ -46,12 +46,18 @@ def _fmt(v: float) -> str:
     return f"{v:.3e}"
 
 
-def _plot_prior_posterior(idata, names, out: Path):
+def _plot_prior_posterior(idata, params, out: Path):
+    """One panel per parameter (`params`: the summary's parameter records), its title the name
+    with its unit: [1] for a factor on the scene's nominal value (the key's own unit otherwise)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    names = [p["name"] for p in params]
+    units = {p["name"]: ("factor [1]" if p.get("relative") else
+                         f"[{p['unit']}]" if p.get("unit") not in (None, "", "1") else "[1]")
+             for p in params}
     n = len(names)
     cols = 4
     rows = (n + cols - 1) // cols
@@ -64,7 +70,7 @@ def _plot_prior_posterior(idata, names, out: Path):
         ax.hist(prior, bins=bins, density=True, color="0.75", label="prior")
         ax.hist(post, bins=bins, density=True, histtype="step", color="C0", lw=1.6,
                 label="posterior")
-        ax.set_title(name, fontsize=8)
+        ax.set_title(f"{name} {units[name]}", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.set_yticks([])
     for ax in axes.ravel()[n:]:
@@ -229,7 +235,7 @@ def write_calibration_report(path: Path, out: Path) -> list[str]:
     idata, curves, summary = _load(path)
     params = summary["parameters"]
     names = [p["name"] for p in params]
-    _plot_prior_posterior(idata, names, out / "prior_posterior.png")
+    _plot_prior_posterior(idata, params, out / "prior_posterior.png")
     _plot_go_curves(idata, curves, summary, out / "go_curves.png")
     _plot_h50(idata, summary, out / "h50.png")
     rho = _correlations(idata, names)
@@ -449,9 +455,16 @@ def _assumptions(summary, attrs) -> list[str]:
         "Surrogate: a quadratic least-squares polynomial of ln H_c in standardized "
         "(log-)inputs per scene, trained on solver runs over the prior's normal scores on "
         "[-3, 3]; its held-out error enters the discrepancy's variance.",
-        "Sampler: emcee's ensemble sampler with differential-evolution and snooker moves "
-        "(walkers as chains for ArviZ's R-hat).",
+        "Sampler: emcee's ensemble sampler with differential-evolution and snooker moves, "
+        "the snooker move corrected as in emcee PR #531 (3.1.6's leaves posteriors ~10 % too "
+        "narrow: docs/calibration.md); walkers as chains for ArviZ's R-hat.",
     ]
+    # The prior study's own judgements (its [study] assumptions) are this calibration's too.
+    prior_doc = tomllib.loads(attrs.get("prior_study_text", "") or "")
+    out += [f"From the prior study: {a.strip()}"
+            for a in (prior_doc.get("study") or {}).get("assumptions", [])]
+    own = tomllib.loads(attrs["study_text"]).get("study", {}).get("assumptions", [])
+    out += [a.strip() for a in own]
     pop = doc.get("friction_population")
     if pop:
         out.append(f"Friction population: ln mu_f ~ N(m, tau^2), m ~ N(ln {pop['median']}, "
