@@ -65,12 +65,15 @@ def _plot_prior_posterior(idata, params, out: Path):
     for ax, name in zip(axes.ravel(), names):
         post = idata.posterior[name].values.ravel()
         prior = idata.prior[name].values.ravel()
+        if units[name] == "[J/kg]":  # heats of reaction: MJ/kg, not an axis offset of 1e6
+            post, prior, units[name] = post / 1e6, prior / 1e6, "[MJ/kg]"
         lo, hi = np.quantile(np.concatenate([prior, post]), [0.005, 0.995])
         bins = np.linspace(lo, hi, 40)
         ax.hist(prior, bins=bins, density=True, color="0.75", label="prior")
         ax.hist(post, bins=bins, density=True, histtype="step", color="C0", lw=1.6,
                 label="posterior")
-        ax.set_title(f"{name} {units[name]}", fontsize=8)
+        sep = "\n" if len(name) + len(units[name]) > 40 else " "  # long names: unit below
+        ax.set_title(f"{name}{sep}{units[name]}", fontsize=8)
         ax.tick_params(labelsize=7)
         ax.set_yticks([])
     for ax in axes.ravel()[n:]:
