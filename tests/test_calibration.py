@@ -304,3 +304,19 @@ def test_calibration_study_errors_name_the_key(tmp_path, capsys):
                    .replace("mu = 16", "angel = 16"))
     assert main(["run", str(bad)]) == 2
     assert "calibration.quadrature.angel = 16: not an aleatory input" in capsys.readouterr().err
+
+
+def test_cross_validation_verdict_says_no_skill_as_the_go_curve_reports_do():
+    from skidmc.workflows.calibration_report import _cv_verdict
+
+    row = {"log_prior": -0.849, "log_base_rate": -1.074, "log_coin": -0.693, "drops": 3,
+           "goes": 2}
+    # The report's 50-80 uin alumina left out: better than the prior and the base rate, worse
+    # than a coin flip: no skill (skidmc.analysis.skill needs both beaten).
+    assert _cv_verdict({**row, "log_posterior": -0.822}) == (
+        "better than the prior; **no skill**: not better than a coin flip")
+    assert _cv_verdict({**row, "log_posterior": -0.5}).endswith(
+        "skill (beats the base rate and a coin flip)")
+    assert _cv_verdict({**row, "log_posterior": -1.2}).endswith(
+        "not better than the base rate or a coin flip")
+    assert "not measurable" in _cv_verdict({**row, "log_posterior": -0.01, "goes": 0})

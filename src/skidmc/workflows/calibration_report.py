@@ -299,13 +299,7 @@ def write_calibration_report(path: Path, out: Path) -> list[str]:
                "Brier: posterior | prior | base rate | coin | verdict (log score) |",
                "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in cv:
-            gain = r["log_posterior"] - r["log_prior"]
-            verdict = ("better than the prior" if gain > 0.005 else
-                       "worse than the prior" if gain < -0.005 else "as the prior")
-            beaten = [w for w, key in (("base rate", "log_base_rate"), ("coin", "log_coin"))
-                      if r["log_posterior"] > r[key]]
-            verdict += ("; beats " + " and ".join(beaten) if beaten
-                        else "; NO skill: worse than base rate and coin")
+            verdict = _cv_verdict(r)
             md.append(f"| {r['target']} | {r['drops']} ({r['goes']}) | "
                       f"{r['log_posterior']:.3f} | {r['log_prior']:.3f} | "
                       f"{r['log_base_rate']:.3f} | {r['log_coin']:.3f} | "
@@ -366,6 +360,23 @@ def write_calibration_report(path: Path, out: Path) -> list[str]:
            "noisy).", ""]
     (out / "summary.md").write_text("\n".join(md) + "\n")
     return printed
+
+
+def _cv_verdict(r: dict) -> str:
+    """The cross-validation row's verdict on the log score: against the prior, then skill as in
+    the go-curve reports (:mod:`skidmc.analysis.skill`): better than both the base rate and a
+    coin flip, else "no skill" naming what it does not beat; not measurable where every drop
+    had the same outcome."""
+    gain = r["log_posterior"] - r["log_prior"]
+    verdict = ("better than the prior" if gain > 0.005 else
+               "worse than the prior" if gain < -0.005 else "as the prior")
+    lost = [w for w, key in (("the base rate", "log_base_rate"), ("a coin flip", "log_coin"))
+            if not r["log_posterior"] > r[key]]
+    if r["goes"] in (0, r["drops"]):
+        return verdict + "; skill not measurable (every drop had the same outcome)"
+    if not lost:
+        return verdict + "; skill (beats the base rate and a coin flip)"
+    return verdict + "; **no skill**: not better than " + " or ".join(lost)
 
 
 def _hazard_studies(attrs) -> list[Path]:
