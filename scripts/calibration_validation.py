@@ -182,7 +182,8 @@ def main(argv=None) -> int:
         f"{k}x: the truth outside the 95 % interval for {', '.join(v) if v else 'no target'}"
         for k, v in misses.items())
         + ". Four 95 % intervals miss twice or more with probability 1.4 % (the earlier run, "
-        "with emcee 3.1.6's snooker move, missed two at 1x)."]
+        "with emcee 3.1.6's snooker move and the ensemble before the temperature tables, missed "
+        "two at 1x)."]
     lines += ["", "Posterior sd of each normal score (the prior's is 1):", "",
               "| parameter | 1x | 10x |", "|---|---|---|"]
     for p in model.parameters:
@@ -223,6 +224,8 @@ def _figure(ranks, names, draws, replications, out):
         ax.set_title(name.replace("[", "\n[") if len(name) > 28 else name, fontsize=7)
         ax.set_xticks(range(10))
         ax.set_xlabel("rank bin (0: lowest tenth)", fontsize=6)
+        if j % cols == 0:
+            ax.set_ylabel("truths in the bin", fontsize=6)
         ax.tick_params(labelsize=6)
     for ax in axes.ravel()[len(names):]:
         ax.axis("off")
