@@ -215,8 +215,10 @@ def _plot_correlations(rho, names, out: Path):
 
     fig, ax = plt.subplots(figsize=(8.5, 7.5))
     im = ax.imshow(rho, vmin=-1, vmax=1, cmap="RdBu_r")
-    ax.set_xticks(range(len(names)), names, rotation=90, fontsize=7)
-    ax.set_yticks(range(len(names)), names, fontsize=7)
+    # Long names (a conductivity shared by two scenes) on two lines, so none is cut off.
+    labels = [n.replace("[", "\n[") if len(n) > 28 else n for n in names]
+    ax.set_xticks(range(len(names)), labels, rotation=90, fontsize=7)
+    ax.set_yticks(range(len(names)), labels, fontsize=7)
     for i in range(len(names)):
         for j in range(len(names)):
             if i != j and abs(rho[i, j]) >= 0.3:
