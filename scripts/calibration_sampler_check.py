@@ -57,7 +57,10 @@ def _ratio(logs) -> tuple[float, float, int]:
     return math.exp(v.mean()), v.std(ddof=1) / math.sqrt(v.size), v.size
 
 
-def gaussian(seeds: int, snooker: str) -> tuple[float, float, int]:
+def gaussian_log_ratios(seeds, snooker: str) -> np.ndarray:
+    """ln(sd of the draws / exact sd), (seed, coordinate), for a 15-dimensional correlated
+    Gaussian (a fixed covariance) sampled at the SBC's settings with each seed of `seeds`
+    (also tests/test_calibration.py's check of the sampler's spread)."""
     ndim = 15
     a = np.random.default_rng(0).standard_normal((ndim, ndim))
     cov = 0.3 * (a @ a.T / ndim + np.eye(ndim))
@@ -66,8 +69,12 @@ def gaussian(seeds: int, snooker: str) -> tuple[float, float, int]:
     def log_prob(x):
         return -0.5 * np.einsum("ij,jk,ik->i", x, prec, x)
 
-    return _ratio([np.log(_sample(log_prob, ndim, s, snooker).std(axis=0)
-                          / np.sqrt(np.diag(cov))) for s in range(seeds)])
+    return np.array([np.log(_sample(log_prob, ndim, s, snooker).std(axis=0)
+                            / np.sqrt(np.diag(cov))) for s in seeds])
+
+
+def gaussian(seeds: int, snooker: str) -> tuple[float, float, int]:
+    return _ratio(gaussian_log_ratios(range(seeds), snooker))
 
 
 def grid(replications: int, seed: int = 8) -> dict[str, tuple[float, float, int]]:

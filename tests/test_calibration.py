@@ -114,51 +114,23 @@ def test_emcee_recovers_a_known_posterior_and_arviz_reads_it():
     assert all(v["r_hat"] < 1.05 and v["ess_bulk"] > 400 for v in d.values())
 
 
-def _gaussian_sd_log_ratio(moves_or_none, seeds=range(8)):
-    """Mean ln(sample sd / true sd) over seeds and the 15 coordinates of a correlated Gaussian,
-    sampled at the SBC's settings (36 walkers, 300 + 600 steps): by run_emcee (None) or by
-    emcee with `moves`."""
-    import emcee
-
-    ndim = 15
-    a = np.random.default_rng(0).standard_normal((ndim, ndim))
-    cov = 0.3 * (a @ a.T / ndim + np.eye(ndim))
-    prec = np.linalg.inv(cov)
-
-    def log_prob(x):
-        return -0.5 * np.einsum("ij,jk,ik->i", x, prec, x)
-
-    out = []
-    for seed in seeds:
-        if moves_or_none is None:
-            chain, _, _ = cal.run_emcee(log_prob, ndim, walkers=36, burn=300, steps=600, thin=1,
-                                        seed=seed)
-            flat = chain.reshape(-1, ndim)
-        else:
-            sampler = emcee.EnsembleSampler(36, ndim, log_prob, vectorize=True,
-                                            moves=moves_or_none())
-            sampler._random = np.random.mtrand.RandomState(seed)
-            sampler.run_mcmc(np.random.default_rng(seed).standard_normal((36, ndim)), 900,
-                             progress=False)
-            flat = sampler.get_chain(discard=300).reshape(-1, ndim)
-        out.append(np.log(flat.std(axis=0) / np.sqrt(np.diag(cov))))
-    return float(np.mean(out))
-
-
 def test_emcee_moves_keep_the_posterior_spread():
     # A 15-dimensional correlated Gaussian, whose sd is known: the sampler's draws must have
     # it. Over 8 seeds x 15 coordinates the mean log sd ratio has a Monte Carlo sd of ~0.0025
     # (0.0011 measured over 40 seeds), so 0.015 is 6 sd; emcee 3.1.6's own snooker move in
     # the same mixture gives -0.11 (10 % too narrow: the cause of the SBC's ranks piling at
     # the ends, results/validation/calibration_sbc.md), which the check must catch.
+    # The same 15-dimensional Gaussian and settings as scripts/calibration_sampler_check.py.
+    import sys
+
     import emcee
 
-    assert abs(_gaussian_sd_log_ratio(None)) < 0.015
+    sys.path.insert(0, str(ROOT / "scripts"))
+    from calibration_sampler_check import gaussian_log_ratios
+
+    assert abs(gaussian_log_ratios(range(8), "corrected").mean()) < 0.015
     if emcee.__version__ == "3.1.6":  # the release without emcee's pull request #531
-        buggy = _gaussian_sd_log_ratio(lambda: [(emcee.moves.DEMove(), 0.8),
-                                                (emcee.moves.DESnookerMove(), 0.2)],
-                                       seeds=range(3))
-        assert buggy < -0.05
+        assert gaussian_log_ratios(range(3), "emcee 3.1.6").mean() < -0.05
 
 
 def test_parameter_values_interpolate_the_prior_quantiles():
