@@ -29,7 +29,7 @@ from skidmc.solver.plan import (
     pair_root_tolerance,
     predicted_correction,
 )
-from skidmc.solver.search import _search, _tighten
+from skidmc.solver.search import SearchOptions, _search, _tighten
 
 
 @pytest.mark.parametrize("rtol", [3e-2, 1e-2, 5e-3, 3e-3, 1e-3, 1e-4])
@@ -115,11 +115,10 @@ def test_the_studies_rtol_gets_a_looser_root():
 
 def test_a_tightened_root_reuses_its_simulations():
     scene = get_preset("paper-quartz")
-    common = dict(h_min=1e-3, h_max=1e4, method="brent", melting=True, runaway_fraction=None,
-                  melt_width=4.0)
-    loose = _search(scene, 1e-2, 1.0, 5e-3, **common)
-    tight, added = _tighten(scene, 1e-2, loose, 5e-3, 2e-4, common)
-    reference = _search(scene, 1e-2, 1.0, 1e-6, **common)
+    opts = SearchOptions(rtol=1e-2, melt_width=4.0)
+    loose = _search(scene, opts, 1.0, 5e-3)
+    tight, added = _tighten(scene, opts, loose, 5e-3, 2e-4)
+    reference = _search(scene, opts, 1.0, 1e-6)
     # The tightened root is within its new tolerance of a root found 200x tighter.
     assert abs(math.log(tight.critical_height / reference.critical_height)) <= 2e-4
     # A height is never simulated twice; tightening a root that is already within 5e-3 takes a

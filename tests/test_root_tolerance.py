@@ -24,6 +24,7 @@ from skidmc.solver.search import (
     FADING_FAST_SHIFT,
     FADING_FAST_SPREAD,
     FINE_SHIFT_SPREAD,
+    SearchOptions,
     _exit_regime,
     _fast_guess,
     _margin_likely_jumps,
@@ -31,8 +32,9 @@ from skidmc.solver.search import (
 )
 
 SCENES = [("paper-quartz", get_preset("paper-quartz"))] + off_preset_scenes(8, seed=17)
-COMMON = dict(h_min=1e-3, h_max=1e4, method="brent", melting=True, runaway_fraction=None,
-              melt_spread=MELT_SPREAD)
+def _options(width):
+    """A plain search at rtol 1e-3 with melting width ``width`` [K] and the default spread."""
+    return SearchOptions(rtol=1e-3, melt_width=width, melt_spread=MELT_SPREAD)
 
 
 @pytest.mark.parametrize(("level", "width", "x_tol"), [
@@ -44,8 +46,8 @@ COMMON = dict(h_min=1e-3, h_max=1e4, method="brent", melting=True, runaway_fract
 def test_roots_are_within_their_tolerance(level, width, x_tol):
     misses = {}
     for label, scene in SCENES:
-        found = _search(scene, 1e-3, level, x_tol, melt_width=width, **COMMON)
-        tight = _search(scene, 1e-3, level, 1e-3 * x_tol, melt_width=width, **COMMON)
+        found = _search(scene, _options(width), level, x_tol)
+        tight = _search(scene, _options(width), level, 1e-3 * x_tol)
         if found.censored or tight.censored:
             assert found.censored == tight.censored, label
             continue
@@ -71,8 +73,8 @@ def test_the_box_has_fading_rebound_scenes():
 @pytest.mark.parametrize(("label", "scene"), FADING, ids=[label for label, _ in FADING])
 def test_fading_rebound_prior_and_root(label, scene):
     x_tol = 2e-4   # tighter than rtol 1e-3's coarse search of a jumping pair (3.8e-4)
-    found = _search(scene, 1e-3, 0.5, x_tol, melt_width=1.0, **COMMON)
-    tight = _search(scene, 1e-3, 0.5, 1e-3 * x_tol, melt_width=1.0, **COMMON)
+    found = _search(scene, _options(1.0), 0.5, x_tol)
+    tight = _search(scene, _options(1.0), 0.5, 1e-3 * x_tol)
     assert found.censored is None and tight.censored is None
     assert abs(math.log(found.critical_height / tight.critical_height)) <= x_tol
     # The prior is honest here: the root lies within 2.5 spreads of its centre (measured
@@ -92,7 +94,7 @@ def test_fine_root_prior_of_a_jumping_pair(label, scene):
     # The fine search of a pair whose margin jumps starts from a prior 0.375 (half of 0.75) of
     # the coarse level's modelled error above the coarse root, with FINE_SHIFT_SPREAD of it as
     # its spread (fitted on seeds 16 and 17); seed 18 was not used to choose it.
-    coarse = _search(scene, 1e-3, 0.5, 2e-7, melt_width=1.0, **COMMON)
-    fine = _search(scene, 1e-3, 1.5, 1e-7, melt_width=1.0, **COMMON)
+    coarse = _search(scene, _options(1.0), 0.5, 2e-7)
+    fine = _search(scene, _options(1.0), 1.5, 1e-7)
     shift = math.log(fine.critical_height / coarse.critical_height) / modelled_error(0.5)
     assert abs(shift - 0.5 * 0.75) <= 2.5 * FINE_SHIFT_SPREAD, shift

@@ -4,7 +4,9 @@
 search of :func:`skidmc.solver.critical_height`: the fast tier's height as first guess, a
 Richardson pair of levels (the first pair, melting width and root tolerances of
 :mod:`skidmc.solver.plan`), its a posteriori error estimate, and the same adaptive rounds
-(tighten the roots, or move the pair up a level) while that estimate exceeds ``rtol``. It
+(tighten the roots, or move the pair up a level) while that estimate exceeds ``rtol``: the
+estimate and each round's decision are the compiled functions of
+:mod:`skidmc.solver.controller` that the CPU search calls too. It
 calls the same compiled kernels as the CPU search (:func:`skidmc.physics.thermal.simulate_core`,
 :func:`skidmc.physics.fast.fast_height_core`, :func:`skidmc.physics.meshes.fill_meshes`,
 :func:`skidmc.physics.mechanics.impact_constants` and the model's scalar functions), on
@@ -65,6 +67,17 @@ from skidmc.physics.thermal import (
     INFO_T_EVENT,
     simulate_core,
 )
+from skidmc.solver.controller import (
+    DONE,
+    MAX_ADAPTIVE_ROUNDS,
+    NARROW,
+    REFINE,
+    TIGHTEN_BOTH,
+    TIGHTEN_FINE,
+    next_round,
+    pair_estimate,
+    richardson_value,
+)
 from skidmc.solver.model import (
     BASE_RESOLUTION,
     DEPTH_DIFFUSION_LENGTHS,
@@ -76,17 +89,8 @@ from skidmc.solver.model import (
     melt_width_floor,
     model_runaway_temperature,
 )
-from skidmc.solver.plan import (
-    MAX_ADAPTIVE_LEVEL,
-    MAX_ROOT_TOLERANCE,
-    MELT_SHARE,
-    ROOT_SHARE,
-    TIGHTEN_FRACTION,
-    a_posteriori_error,
-    modelled_error,
-)
+from skidmc.solver.plan import modelled_error
 from skidmc.solver.roots import FAST_GUESS_ERROR
-from skidmc.solver.search import MAX_ADAPTIVE_ROUNDS
 from skidmc.solver.simulate import MAX_STEPS, STALL_ATTEMPTS_LEVEL0, STALL_FACTOR, STALL_FLOOR
 
 __all__ = [
@@ -357,12 +361,6 @@ def _tighten(row, sc, level, melt_width, x_tol, work, info, res):
 
 
 @njit(cache=True)
-def _root_error(coarse_tol, fine_tol):
-    """Root errors d_{L-1}, d_L enter R = H_L + (H_L - H_{L-1}) / 3 as (4 d_L + d_{L-1}) / 3."""
-    return (4.0 * fine_tol + coarse_tol) / 3.0
-
-
-@njit(cache=True)
 def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread, x_tol,
                          melting, runaway_fraction, table, gl_x, gl_w, work, fast_work, info,
                          coarse, fine, out):
@@ -478,59 +476,49 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
         out[OUT_EVALUATIONS] = evaluations
         return
 
+    # The adaptive rounds: the CPU search's rule (skidmc.solver.controller), on the meshed
+    # target (exact and signs False) with the width never narrowed here.
     for round_ in range(MAX_ADAPTIVE_ROUNDS + 1):
-        h_c, h_f = math.exp(coarse[0]), math.exp(fine[0])
-        correction = (h_f - h_c) / 3.0
-        height = h_f + correction
-        relative = correction / height
-        pair = a_posteriori_error(relative, coarse_level, melt_spread)
-        estimate = pair + melt_bias + _root_error(coarse_tol, fine_tol)
-        if estimate <= rtol * (1.0 + 1e-12) or round_ == MAX_ADAPTIVE_ROUNDS:
+        height, relative = richardson_value(math.exp(coarse[0]), math.exp(fine[0]))
+        pair, estimate = pair_estimate(relative, coarse_level, melt_spread, False, False,
+                                       melt_bias, coarse_tol, fine_tol)
+        if round_ == MAX_ADAPTIVE_ROUNDS:
             break
-        room = rtol - pair - melt_bias
-        if room >= ROOT_SHARE * rtol * (1.0 - 1e-9):
-            # Tighten the roots from their brackets: the fine one alone when that suffices
-            # (aiming at TIGHTEN_FRACTION of the room, as the CPU search does).
-            aim = TIGHTEN_FRACTION * room
-            tight = (3.0 * aim - coarse_tol) / 4.0
+        action, next_coarse_tol, next_fine_tol, value = next_round(
+            rtol, estimate, pair, melt_bias, relative, height, coarse_level, coarse_tol,
+            fine_tol, melt_width, 0, melt_spread, False, False)
+        if action == DONE:
+            break
+        if action == TIGHTEN_FINE or action == TIGHTEN_BOTH:
+            # Tighten the roots from their brackets.
             before = coarse[6] + fine[6]
-            if tight >= 0.25 * aim:
-                _tighten(row, sc, fine_level, melt_width, tight, work, info, fine)
-                fine_tol = tight
-            else:
-                _tighten(row, sc, coarse_level, melt_width, aim, work, info, coarse)
-                _tighten(row, sc, fine_level, melt_width, 0.5 * aim, work, info, fine)
-                coarse_tol, fine_tol = aim, 0.5 * aim
+            if action == TIGHTEN_BOTH:
+                _tighten(row, sc, coarse_level, melt_width, next_coarse_tol, work, info, coarse)
+            _tighten(row, sc, fine_level, melt_width, next_fine_tol, work, info, fine)
             evaluations += coarse[6] + fine[6] - before
             if coarse[7] == 0.0 or fine[7] == 0.0:
                 out[OUT_STATUS], out[OUT_EVALUATIONS] = STATUS_CPU, evaluations
                 return
-        elif melt_bias > 2.0 * MELT_SHARE * rtol:
-            # The CPU search narrows the melting width here.
+        elif action == NARROW or (action == REFINE and fine_level + 1.0 > DEVICE_MAX_LEVEL):
+            # The CPU search narrows the melting width (measuring its bias with an extra
+            # simulation), or refines beyond this thread's arrays.
             out[OUT_STATUS], out[OUT_EVALUATIONS] = STATUS_CPU, evaluations
             return
-        elif fine_level + 1.0 <= MAX_ADAPTIVE_LEVEL and melt_bias + ROOT_SHARE * rtol < rtol:
-            if fine_level + 1.0 > DEVICE_MAX_LEVEL:
-                out[OUT_STATUS], out[OUT_EVALUATIONS] = STATUS_CPU, evaluations
-                return
-            # Refine: the next level's root predicted from this pair; the pair moves up.
-            room = rtol - melt_bias - a_posteriori_error(0.5 * relative, fine_level,
-                                                         melt_spread)
-            tight = min(MAX_ROOT_TOLERANCE, max(0.5 * ROOT_SHARE * rtol,
-                                                (3.0 * room - fine_tol) / 4.0))
-            guess = math.log(height * (1.0 - 0.25 * relative))
+        elif action == REFINE:
+            # The next level's root predicted from this pair (value [m]); the pair moves up.
             for k in range(8):
                 coarse[k] = fine[k]
-            _search(row, sc, fine_level + 1.0, melt_width, guess, 0.5 * abs(relative) + tight,
-                    tight, x_min, x_max, work, info, fine)
+            _search(row, sc, fine_level + 1.0, melt_width, math.log(value),
+                    0.5 * abs(relative) + next_fine_tol, next_fine_tol, x_min, x_max, work,
+                    info, fine)
             evaluations += fine[6]
             coarse_level, fine_level = fine_level, fine_level + 1.0
-            coarse_tol, fine_tol = fine_tol, tight
             if fine[7] == 0.0 or fine[1] != CENSOR_NONE:
                 out[OUT_STATUS], out[OUT_EVALUATIONS] = STATUS_CPU, evaluations
                 return
-        else:
+        else:   # STOP
             break
+        coarse_tol, fine_tol = next_coarse_tol, next_fine_tol
     out[OUT_HEIGHT] = height
     out[OUT_CENSOR] = CENSOR_NONE
     # As the CPU search (search._censor_beyond_bounds): an extrapolation beyond a bound is

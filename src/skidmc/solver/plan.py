@@ -413,6 +413,7 @@ def pair_root_tolerance(rtol, level, melt_width, melt_spread, exact=False, signs
     return max(ROOT_SHARE * rtol, min(MAX_ROOT_TOLERANCE, room))
 
 
+@njit(cache=True)
 def jump_root_tolerances(rtol, level, melt_width, melt_spread, exact=False):
     """First root tolerances on ln H [1] ``(coarse, fine)`` of a pair whose margin jumps.
 

@@ -17,46 +17,48 @@ acted yet. The report's own method, geometric bisection on go/no-go, is kept as
 
 
 import dataclasses
-import functools
 import math
 import numbers
 import time
 
 from skidmc.errors import SceneError, SkidmcError
-from skidmc.physics.mechanics import (
-    EXIT_STOPS_SLIDING,
-    contact_pressure,
-    impact_constants,
-    sliding_velocity,
-)
-from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.scene.scenes import Scene
+from skidmc.solver.controller import (
+    DONE,
+    MAX_ADAPTIVE_ROUNDS,
+    NARROW,
+    REFINE,
+    TIGHTEN_BOTH,
+    TIGHTEN_FINE,
+    first_root_tolerances,
+    next_round,
+    pair_estimate,
+    richardson_value,
+)
 from skidmc.solver.model import (
     build_model,
     constant_property_scene,
     elastic_target_reason,
-    melt_width_floor,
     target_temperature_range,
+)
+from skidmc.solver.options import (
+    DEFAULT_H_MAX,
+    DEFAULT_H_MIN,
+    FADING_EXIT_SPEED,
+    TARGETS,
+    SearchOptions,
+    exit_regime,
+    margin_likely_jumps,
+    resolve_options,
 )
 from skidmc.solver.plan import (
     EXACT_FINE_SHIFT,
     EXACT_FINE_SHIFT_SPREAD,
     EXACT_STEADY_FINE_OVERSHOOT,
-    MAX_ADAPTIVE_LEVEL,
-    MAX_ROOT_TOLERANCE,
-    MELT_SHARE,
-    ROOT_SHARE,
-    TIGHTEN_FRACTION,
-    a_posteriori_error,
     extrapolated_error,
-    first_pair_level,
-    jump_root_tolerances,
     melt_bias,
     melt_bias_bound,
-    melt_width_for_rtol,
     modelled_error,
-    pair_root_tolerance,
-    plan_for_rtol,
     root_tolerance,
 )
 from skidmc.solver.results import HeightResult, flag_unmet_rtol
@@ -77,11 +79,8 @@ __all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "FADING_EXIT_SPEED",
            "FADING_FAST_SHIFT", "FADING_FAST_SPREAD", "FAST_STOPS_SLIDING_SPREAD",
            "FINE_SHIFT_SPREAD",
            "MAX_ADAPTIVE_ROUNDS",
-           "MELT_SHIFT_FACTOR", "TARGETS", "TIERS", "SceneUnsolvable", "critical_height"]
-
-#: Most corrections (tightened roots, a narrower melting width, a finer pair) the default
-#: search applies to its first Richardson pair before it reports the estimate it reached.
-MAX_ADAPTIVE_ROUNDS = 8
+           "MELT_SHIFT_FACTOR", "TARGETS", "TIERS", "SceneUnsolvable", "SearchOptions",
+           "critical_height"]
 
 #: The melting width's bias b(w) on the critical height [1] from the root's shift dx when the
 #: width is doubled: b(w) = 1.3-1.9 dx on the report presets (concave, first order in w); 2.5
@@ -99,17 +98,6 @@ TIERS = ("full", "fast")
 #: scripts/fast_tier_error.py after :data:`skidmc.physics.fast.STOPS_SLIDING_FACTOR`,
 #: rounded up. A guess further off costs doubling steps, never a wrong root.
 FAST_STOPS_SLIDING_SPREAD = 0.02
-
-#: Sliding speed at rebound, as a fraction of the initial one, below which a rebound scene's
-#: margin is treated as likely to jump at its root (the heating fades before the exit, so the
-#: event comes before the fade or not at all), as where sliding stops: its first root
-#: tolerances are split for halvings (:func:`_margin_likely_jumps`). On the 16 off-preset
-#: scenes of ``skidmc.scene.validation``, the rebound scenes whose margin jumped or folded at the
-#: root exit at 0.14-0.47 of the initial speed, the smooth ones at 0.57-0.90 (the presets
-#: 0.81-0.92). At rtol 1e-3 the four below 0.5 took 1-2 fewer simulations (11-12 against
-#: 12-14); on a fresh draw (seed 17) the one rebound scene below 0.5 took 11 against 14, and
-#: one at 0.59 still jumped (13 either way): the threshold misses some, never costs.
-FADING_EXIT_SPEED = 0.5
 
 #: Shift [1, in ln H] of the root's prior above the fast tier's height on rebound scenes whose
 #: heating fades before the exit (sliding speed at rebound below :data:`FADING_EXIT_SPEED` of the
@@ -135,14 +123,6 @@ FADING_FAST_SPREAD = 0.02
 #: one fine simulation on 9 of those 20 scenes. A root farther out costs doubling steps, never
 #: a wrong root.
 FINE_SHIFT_SPREAD = 0.06
-
-#: How the target is modelled (:func:`skidmc.solver.model.build_model`): "mesh", on its own
-#: finite-volume mesh; "exact", the exact semi-infinite solid through Duhamel's integral.
-TARGETS = ("mesh", "exact")
-
-#: Default search bounds [m]: 1 mm to 10 km of drop height.
-DEFAULT_H_MIN = 1e-3
-DEFAULT_H_MAX = 1e4
 
 #: Coarse-to-fine search: at level L >= COARSE_GAP, the critical height is first found at level
 #: L - COARSE_GAP (each simulation ~10x cheaper), and the search at level L starts there with a
@@ -265,62 +245,26 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
         from skidmc.solver.fast import fast_critical_height
 
         return fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
-    if not (isinstance(rtol, (int, float)) and 0.0 < rtol < 0.5):
-        raise SceneError("rtol", rtol, "must be a number in (0, 0.5)")
-    if method not in ("brent", "bisection"):
-        raise SceneError("method", method, "expected 'brent' or 'bisection'")
-    if melt_width is not None and not (isinstance(melt_width, (int, float))
-                                       and melt_width > 0.0):
-        raise SceneError("melt_width", melt_width, "must be a number > 0 [K]")
-    if melt_spread is not None and not (isinstance(melt_spread, (int, float))
-                                        and 0.0 <= melt_spread <= 1.5):
-        # Beyond ~1.5 the first HE cell's Newton iterations stopped converging (2.0 failed on
-        # paper-gold).
-        raise SceneError("melt_spread", melt_spread, "must be a number in [0, 1.5]")
-    # The default: Richardson pairs refined until their own (a posteriori) error estimate meets
-    # rtol, the calibrated model choosing only the first pair. A forced level, a given model or
-    # extrapolate=False keep one plan, with the calibrated model's estimate.
-    adaptive = level is None and model is None and extrapolate is not False
-    if melt_spread is None:
-        melt_spread = MELT_SPREAD if adaptive else 0.0
-    if target is None:
-        # The exact target is homogeneous with constant properties: a stack whose heat
-        # reaches below its top layer, or a target whose properties follow its temperature, is
-        # meshed (docs/targets.md).
-        terms = build_model(scene, meshes=False, rtol=rtol).terms
-        layered = "layered_target" in terms or "temperature_target" in terms
-        target = "exact" if adaptive and not layered else "mesh"
-    elif target not in TARGETS:
-        raise SceneError("target", target, f"expected one of {', '.join(TARGETS)}")
-    signs = adaptive and _margin_likely_jumps(scene)
-    if adaptive:
-        level, extrapolate = first_pair_level(rtol, target == "exact", signs), True
-    elif level is None:
-        level, planned = plan_for_rtol(rtol)
-        extrapolate = planned if extrapolate is None else extrapolate
-    extrapolate = bool(extrapolate) and model is None and level >= 1.0
-    if melt_width is None:
-        # The same width at every level of the search (coarse start, Richardson pairs).
-        melt_width = melt_width_for_rtol(rtol, level)
-    common = dict(h_min=h_min, h_max=h_max, method=method, melting=melting,
-                  runaway_fraction=runaway_fraction, melt_width=float(melt_width),
-                  melt_spread=float(melt_spread), target=target)
-    if adaptive:
+    opts = resolve_options(scene, rtol, h_min=h_min, h_max=h_max, method=method, level=level,
+                           extrapolate=extrapolate, melting=melting,
+                           runaway_fraction=runaway_fraction, model=model,
+                           melt_width=melt_width, melt_spread=melt_spread, target=target)
+    if opts.adaptive:
         # The root finder gets the room the pair is likely not to use; the a posteriori
         # estimate, not the calibrated model, then decides whether it fits (_adaptive_pair).
-        return _adaptive_pair(scene, rtol, level, h_guess, common, start, signs)
-    x_tol = root_tolerance(rtol, level, extrapolate, melt_width)
-    if not extrapolate:
-        res = _search(scene, rtol, level, x_tol, model=model, h_guess=h_guess, **common)
+        return _adaptive_pair(scene, opts, h_guess, start)
+    x_tol = root_tolerance(rtol, opts.level, opts.extrapolate, opts.melt_width)
+    if not opts.extrapolate:
+        res = _search(scene, opts, opts.level, x_tol, model=model, h_guess=h_guess)
         res.wall_time = time.perf_counter() - start
         return res
 
     # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
     # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
     # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
-    coarse = _search(scene, rtol, level - 1.0, x_tol, h_guess=h_guess, **common)
-    fine = _fine_search(scene, rtol, level, 0.5 * x_tol, coarse, x_tol, common, False)
-    res = _censor_beyond_bounds(_richardson(coarse, fine, x_tol, melt_width, False), h_min, h_max)
+    coarse = _search(scene, opts, opts.level - 1.0, x_tol, h_guess=h_guess)
+    fine = _fine_search(scene, opts, opts.level, 0.5 * x_tol, coarse, x_tol)
+    res = _censor_beyond_bounds(_richardson(coarse, fine, opts, x_tol), h_min, h_max)
     res.evaluations = coarse.evaluations + fine.evaluations
     res.wall_time = time.perf_counter() - start
     return res
@@ -337,7 +281,7 @@ critical_height.__doc__ = _critical_height.__doc__.replace(
 critical_height.__wrapped__ = _critical_height  # inspect.signature: the full signature
 
 
-def _fine_search(scene, rtol, level, x_tol, coarse, coarse_tol, common, signs):
+def _fine_search(scene, opts, level, x_tol, coarse, coarse_tol):
     """The fine search of a Richardson pair, started from its coarse search's root and slopes.
 
     The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
@@ -345,160 +289,98 @@ def _fine_search(scene, rtol, level, x_tol, coarse, coarse_tol, common, signs):
     search starts that far up, which lands on the go side within the error model. Where the
     margin jumps (sliding stops), the coarse root's own tolerance ``coarse_tol`` [1] widens
     the prior of the fine root (:func:`skidmc.solver.roots.prior_bisection_root`). With the
-    exact target on a scene located by ``signs``, the prior is the one measured for it
+    exact target on a scene located by ``opts.signs``, the prior is the one measured for it
     (:data:`skidmc.solver.plan.EXACT_FINE_SHIFT`, ``EXACT_FINE_SHIFT_SPREAD``).
     """
     coarse_error = modelled_error(level - 1.0)
     overshoot, spread = 0.75, FINE_SHIFT_SPREAD
-    if common["target"] == "exact":
-        overshoot = 2.0 * EXACT_FINE_SHIFT if signs else EXACT_STEADY_FINE_OVERSHOOT
+    if opts.exact:
+        overshoot = 2.0 * EXACT_FINE_SHIFT if opts.signs else EXACT_STEADY_FINE_OVERSHOOT
         spread = EXACT_FINE_SHIFT_SPREAD
-    return _search(scene, rtol, level, x_tol,
+    return _search(scene, opts, level, x_tol,
                    h_guess=coarse.critical_height if coarse.censored is None else None,
                    overshoot=overshoot * coarse_error,
                    guess_sigma=spread * coarse_error + 0.5 * coarse_tol,
-                   slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history),
-                   **common)
+                   slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history))
 
 
-def _root_error(coarse_tol, fine_tol):
-    """Root-finder error bound [1] of a Richardson value from its searches' tolerances:
-    errors d_{L-1}, d_L enter R = H_L + (H_L - H_{L-1}) / 3 as (4 d_L + d_{L-1}) / 3."""
-    return (4.0 * fine_tol + coarse_tol) / 3.0
-
-
-def _adaptive_pair(scene, rtol, level, h_guess, common, start, signs):
+def _adaptive_pair(scene, opts, h_guess, start):
     """The default search: a Richardson pair whose own estimate is brought within ``rtol``.
 
-    The first pair ``(level - 1, level)`` gets the root tolerance :func:`pair_root_tolerance`
-    (the room its estimate is likely to leave). Its estimate is then measured
-    (:func:`_richardson`: :func:`a_posteriori_error` of the correction, the melting width's
-    bias, and the root errors the tolerances used allow). While it exceeds rtol, the cheapest
-    fix that the measured parts say will do is applied:
-
-    * the pair's own error and the width's bias leave at least ROOT_SHARE rtol: tighten the
-      roots to what they leave (the fine search alone when that suffices: it weighs 4x), each
-      re-search starting from its own root and reusing its simulations (1-2 more);
-    * the width's measured bias exceeds twice its share (MELT_SHARE rtol) and the width can
-      narrow: search again with the width scaled to bring the bias to its share
-      (first order in w), at least the fine level's floor :func:`melt_width_floor`;
-    * otherwise move the pair up a level (its next fine root predicted from the pair), up to
-      :data:`MAX_ADAPTIVE_LEVEL`, unless the width's bias alone leaves no room and cannot
-      narrow further: then the estimate stays above rtol and says so.
+    The first pair ``(level - 1, level)`` gets the root tolerances
+    :func:`skidmc.solver.controller.first_root_tolerances` (the room its estimate is likely to
+    leave). Its estimate is then measured (:func:`_adaptive_value`: the a posteriori error of
+    the correction, the melting width's bias, and the root errors the tolerances used allow).
+    While it exceeds rtol, :func:`skidmc.solver.controller.next_round` (the rule the device
+    search runs too) picks the cheapest fix the measured parts say will do: tighten the roots
+    (each re-search starting from its own root and reusing its simulations), search the pair
+    again with a narrower melting width (measuring its bias anew), or move the pair up a level
+    (its next fine root predicted from the pair), until the estimate meets rtol or nothing
+    left can help: then the estimate stays above rtol and says so.
     """
-    melt_width = common["melt_width"]
-    spread = common["melt_spread"]
-    exact = common["target"] == "exact"
-    if signs:
-        coarse_tol, fine_tol = jump_root_tolerances(rtol, level, melt_width, spread, exact)
-    else:
-        coarse_tol = pair_root_tolerance(rtol, level, melt_width, spread, exact)
-        fine_tol = 0.5 * coarse_tol
-    coarse = _search(scene, rtol, level - 1.0, coarse_tol, h_guess=h_guess, **common)
-    fine = _fine_search(scene, rtol, level, fine_tol, coarse, coarse_tol, common, signs)
+    rtol = opts.rtol
+    coarse_tol, fine_tol = first_root_tolerances(rtol, opts.level, opts.melt_width,
+                                                 opts.melt_spread, opts.exact, opts.signs)
+    coarse = _search(scene, opts, opts.level - 1.0, coarse_tol, h_guess=h_guess)
+    fine = _fine_search(scene, opts, opts.level, fine_tol, coarse, coarse_tol)
     evaluations = coarse.evaluations + fine.evaluations
-    melt, extra = _melt_width_bias(scene, coarse, common)
+    melt, extra = _melt_width_bias(scene, coarse, opts)
     evaluations += extra
-    res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol), melt_width, True, melt,
-                      spread, exact, signs)
+    res, pair = _adaptive_value(coarse, fine, opts, coarse_tol, fine_tol, melt)
     narrowed = 0
     for _ in range(MAX_ADAPTIVE_ROUNDS):
-        if not (res.extrapolated and res.error_estimate > rtol * (1.0 + 1e-12)):
+        if not res.extrapolated:
             break
-        pair = a_posteriori_error(res.richardson_correction, coarse.level, spread, exact, signs)
-        room = rtol - pair - res.melt_bias_estimate
-        # Never below the coarse level's floor: a step far narrower than a level resolves is
-        # badly wrong there (model.MELT_WIDTH_LEVEL0).
-        floor = melt_width_floor(coarse.level)
-        if room >= ROOT_SHARE * rtol * (1.0 - 1e-9):
-            # Tighten the roots: the fine one alone when the coarse one's error still fits.
-            # They aim at TIGHTEN_FRACTION of the room: the pair's correction moves with them.
-            aim = TIGHTEN_FRACTION * room
-            tight = (3.0 * aim - coarse_tol) / 4.0
-            if tight >= 0.25 * aim:
-                fine, n = _tighten(scene, rtol, fine, fine_tol, tight, common)
-                fine_tol = tight
-            else:
-                coarse, n = _tighten(scene, rtol, coarse, coarse_tol, aim, common)
-                fine, m = _tighten(scene, rtol, fine, fine_tol, 0.5 * aim, common)
-                coarse_tol, fine_tol, n = aim, 0.5 * aim, n + m
+        action, next_coarse_tol, next_fine_tol, value = next_round(
+            rtol, res.error_estimate, pair, res.melt_bias_estimate, res.richardson_correction,
+            res.critical_height, coarse.level, coarse_tol, fine_tol, opts.melt_width, narrowed,
+            opts.melt_spread, opts.exact, opts.signs)
+        if action == DONE:
+            break
+        if action == TIGHTEN_FINE:
+            fine, n = _tighten(scene, opts, fine, fine_tol, next_fine_tol)
             evaluations += n
-        elif (res.melt_bias_estimate > 2.0 * MELT_SHARE * rtol and narrowed < 2
-              and common["melt_width"] > floor * (1.0 + 1e-9)):
-            # The width's bias is first order in w: scale it to its share of rtol and search
-            # the pair again at the new width (from the old root), measuring its bias anew.
-            width = max(floor, common["melt_width"] * MELT_SHARE * rtol
-                        / res.melt_bias_estimate)
-            common = dict(common, melt_width=width)
+        elif action == TIGHTEN_BOTH:
+            coarse, n = _tighten(scene, opts, coarse, coarse_tol, next_coarse_tol)
+            fine, m = _tighten(scene, opts, fine, fine_tol, next_fine_tol)
+            evaluations += n + m
+        elif action == NARROW:
+            # Search the pair again at the new width (from the old root), measuring its bias
+            # anew.
+            opts = opts.with_melt_width(value)
             narrowed += 1
-            x_tol = pair_root_tolerance(rtol, fine.level, width, spread, exact, signs)
-            coarse = _search(scene, rtol, coarse.level, x_tol, h_guess=coarse.critical_height,
-                             overshoot=2.0 * res.melt_bias_estimate + x_tol,
+            coarse = _search(scene, opts, coarse.level, next_coarse_tol,
+                             h_guess=coarse.critical_height,
+                             overshoot=2.0 * res.melt_bias_estimate + next_coarse_tol,
                              slope=margin_slope(coarse.history),
-                             go_slope=go_side_slope(coarse.history), **common)
-            coarse_tol, fine_tol = x_tol, 0.5 * x_tol
-            fine = _fine_search(scene, rtol, fine.level, fine_tol, coarse, coarse_tol, common,
-                                signs)
-            melt, extra = _melt_width_bias(scene, coarse, common)
+                             go_slope=go_side_slope(coarse.history))
+            fine = _fine_search(scene, opts, fine.level, next_fine_tol, coarse, next_coarse_tol)
+            melt, extra = _melt_width_bias(scene, coarse, opts)
             evaluations += coarse.evaluations + fine.evaluations + extra
-        elif fine.level + 1.0 <= MAX_ADAPTIVE_LEVEL and (
-                res.melt_bias_estimate + ROOT_SHARE * rtol < rtol
-                or (narrowed < 2 and common["melt_width"] > melt_width_floor(fine.level)
-                    * (1.0 + 1e-9))):
-            # Refine (also where only a finer level's floor lets the width narrow further):
-            # the next level's root is predicted from this pair (its error is a quarter of
-            # the fine level's, which is about the correction), and the pair moves up a
-            # level. Its correction should shrink 4x; half is assumed.
-            correction = res.richardson_correction
-            room = (rtol - res.melt_bias_estimate
-                    - a_posteriori_error(0.5 * correction, fine.level, spread, exact, signs))
-            tight = min(MAX_ROOT_TOLERANCE,
-                        max(0.5 * ROOT_SHARE * rtol, (3.0 * room - fine_tol) / 4.0))
-            guess = res.critical_height * (1.0 - 0.25 * correction)
-            finer = _search(scene, rtol, fine.level + 1.0, tight, h_guess=guess,
-                            overshoot=0.5 * abs(correction) + tight,
+        elif action == REFINE:
+            # value: the next level's root predicted from this pair [m].
+            finer = _search(scene, opts, fine.level + 1.0, next_fine_tol, h_guess=value,
+                            overshoot=0.5 * abs(res.richardson_correction) + next_fine_tol,
                             slope=margin_slope(fine.history),
-                            go_slope=go_side_slope(fine.history), **common)
+                            go_slope=go_side_slope(fine.history))
             evaluations += finer.evaluations
             coarse, fine = fine, finer
-            coarse_tol, fine_tol = fine_tol, tight
-        else:
+        else:   # STOP: nothing left that can help
             break
-        res = _richardson(coarse, fine, _root_error(coarse_tol, fine_tol),
-                          common["melt_width"], True, melt, spread, exact, signs)
-    res = _censor_beyond_bounds(res, common["h_min"], common["h_max"])
+        coarse_tol, fine_tol = next_coarse_tol, next_fine_tol
+        res, pair = _adaptive_value(coarse, fine, opts, coarse_tol, fine_tol, melt)
+    res = _censor_beyond_bounds(res, opts.h_min, opts.h_max)
     res.evaluations = evaluations
     res.wall_time = time.perf_counter() - start
     return res
 
 
-def _margin_likely_jumps(scene):
-    """Whether the scene's margin is likely to jump at its root [bool]: sliding stops before
-    rebound, or the heating fades before rebound (:func:`_exit_regime`).
-
-    Only the first root tolerances depend on it (:func:`skidmc.solver.plan.jump_root_tolerances`
-    where halvings are what a root costs); every estimate uses the tolerances actually used.
-    """
-    return _exit_regime(scene) != "steady"
+# Kept under their old names: benchmarks and scripts import them from here.
+_margin_likely_jumps = margin_likely_jumps
+_exit_regime = exit_regime
 
 
-def _exit_regime(scene):
-    """How the scene's heating ends: "stops_sliding" (before rebound), "fading" (a rebound with
-    the sliding speed at rebound, report Eq. 10, below :data:`FADING_EXIT_SPEED` of the initial
-    one) or "steady" (the other rebounds)."""
-    pressure = contact_pressure(scene.flow_stress, scene.target_hardness)
-    _, _, t_exit, exit_code, _, _ = impact_constants(
-        scene.mu, pressure, scene.billet_mass, scene.billet_diameter, scene.angle, scene.tilt)
-    if exit_code == EXIT_STOPS_SLIDING:
-        return "stops_sliding"
-    speed_at = functools.partial(sliding_velocity, height=1.0, mu=scene.mu, angle=scene.angle,
-                                 tilt=scene.tilt, flow_stress=pressure,
-                                 billet_mass=scene.billet_mass,
-                                 billet_diameter=scene.billet_diameter)
-    return "fading" if speed_at(t_exit) < FADING_EXIT_SPEED * speed_at(0.0) else "steady"
-
-
-def _tighten(scene, rtol, search, old_tol, tol, common):
+def _tighten(scene, opts, search, old_tol, tol):
     """``search`` again at the tighter root tolerance ``tol`` [1], from its own root.
 
     The root lies within ``old_tol`` of the old one: the new search starts there, with the old
@@ -507,15 +389,15 @@ def _tighten(scene, rtol, search, old_tol, tol, common):
     """
     if search.censored is not None:
         return search, 0
-    new = _search(scene, rtol, search.level, tol, h_guess=search.critical_height,
+    new = _search(scene, opts, search.level, tol, h_guess=search.critical_height,
                   overshoot=old_tol, slope=margin_slope(search.history),
-                  go_slope=go_side_slope(search.history), known=search.history, **common)
+                  go_slope=go_side_slope(search.history), known=search.history)
     added = new.evaluations
     new.evaluations += search.evaluations
     return new, added
 
 
-def _melt_width_bias(scene, coarse, common):
+def _melt_width_bias(scene, coarse, opts):
     """Measured bias of the melting step's width on ln H [1], and the simulations it took.
 
     Only for scenes whose ignition temperature (:attr:`SkidModel.ignition_temperature`) lies
@@ -531,7 +413,7 @@ def _melt_width_bias(scene, coarse, common):
     """
     if coarse.censored is not None or "melting" not in coarse.terms:
         return None, 0
-    if not build_model(scene, level=coarse.level, melting=common["melting"],
+    if not build_model(scene, level=coarse.level, melting=opts.melting,
                        meshes=False).ignition_temperature < scene.he_melting_point:
         # The calibrated bound was measured on scenes that ignite above the melting point
         # (the presets: T_ign ~600 K, 47 K above it); there it holds, and a level-0 shift
@@ -544,12 +426,9 @@ def _melt_width_bias(scene, coarse, common):
     if slope is None or slope < -FOLD_SLOPE or not go:
         return None, 0
     height, m_go = go[0]
-    kwargs = ({} if common["runaway_fraction"] is None
-              else {"runaway_fraction": common["runaway_fraction"]})
-    model = build_model(scene, level=coarse.level, melting=common["melting"],
-                        melt_width=2.0 * common["melt_width"],
-                        melt_spread=common["melt_spread"], target=common["target"],
-                        rtol=coarse.rtol, **kwargs)
+    model = build_model(scene, level=coarse.level, melting=opts.melting,
+                        melt_width=2.0 * opts.melt_width, melt_spread=opts.melt_spread,
+                        target=opts.target, rtol=coarse.rtol, **opts.model_kwargs())
     m_wide = simulate(model, height).margin
     if not math.isfinite(m_wide):
         return None, 1
@@ -571,37 +450,49 @@ def _censor_beyond_bounds(res, h_min, h_max):
                                critical_height=h_max if censored == "above" else h_min)
 
 
-def _richardson(coarse, fine, x_tol, melt_width, adaptive, melt=None, melt_spread=0.0,
-                exact=False, signs=False):
-    """The Richardson value of a pair of searches (a new result; ``fine`` if either is censored).
-
-    Its ``error_estimate`` [1] is, for the default (``adaptive``) search, measured on the pair:
-    :func:`a_posteriori_error` of its correction, plus the melting width's bias (the bound, or
-    ``melt`` measured on the scene when larger) and ``x_tol``, the root errors its searches'
-    tolerances allow (:func:`_root_error`); otherwise the calibrated model's, with ``x_tol``
-    the plan's root tolerance.
-    """
+def _pair_value(coarse, fine):
+    """The Richardson value of a pair of searches (a new result; ``fine`` if either is
+    censored) and whether it was extrapolated."""
     res = dataclasses.replace(fine, history=list(fine.history))
     if fine.censored is not None or coarse.censored is not None:
-        return res
-    correction = (fine.critical_height - coarse.critical_height) / 3.0
-    res.critical_height = fine.critical_height + correction
-    res.richardson_correction = correction / res.critical_height
+        return res, False
+    res.critical_height, res.richardson_correction = richardson_value(coarse.critical_height,
+                                                                      fine.critical_height)
     res.extrapolated = True
-    if adaptive:
-        # The width's bias: the calibrated bound, or what this scene measured if larger.
-        res.melt_bias_estimate = max(melt_bias_bound(fine.terms, melt_width), melt or 0.0)
-        res.error_estimate = (a_posteriori_error(res.richardson_correction, coarse.level,
-                                                 melt_spread, exact, signs)
-                              + res.melt_bias_estimate + x_tol)
-    else:
+    return res, True
+
+
+def _richardson(coarse, fine, opts, x_tol):
+    """The Richardson value of a pair of a fixed plan, with the calibrated model's estimate
+    (``x_tol``: the plan's root tolerance [1])."""
+    res, extrapolated = _pair_value(coarse, fine)
+    if extrapolated:
         res.error_estimate = (extrapolated_error(fine.level) + x_tol
-                              + melt_bias(fine.terms, melt_width, fine.level))
+                              + melt_bias(fine.terms, opts.melt_width, fine.level))
     return res
 
-def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway_fraction,
-            melt_width, melt_spread=0.0, target="mesh", model=None, h_guess=None,
-            overshoot=None, slope=None, go_slope=None, known=(), guess_sigma=None):
+
+def _adaptive_value(coarse, fine, opts, coarse_tol, fine_tol, melt):
+    """The Richardson value of the default search's pair and its a posteriori part [1].
+
+    Its ``error_estimate`` [1] is measured on the pair
+    (:func:`skidmc.solver.controller.pair_estimate`): the a posteriori error of its correction,
+    plus the melting width's bias (the bound, or ``melt`` measured on the scene when larger)
+    and the root errors its searches' tolerances allow.
+    """
+    res, extrapolated = _pair_value(coarse, fine)
+    if not extrapolated:
+        return res, 0.0
+    # The width's bias: the calibrated bound, or what this scene measured if larger.
+    res.melt_bias_estimate = max(melt_bias_bound(fine.terms, opts.melt_width), melt or 0.0)
+    pair, res.error_estimate = pair_estimate(res.richardson_correction, coarse.level,
+                                             opts.melt_spread, opts.exact, opts.signs,
+                                             res.melt_bias_estimate, coarse_tol, fine_tol)
+    return res, pair
+
+
+def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, overshoot=None, slope=None,
+            go_slope=None, known=(), guess_sigma=None):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
@@ -614,11 +505,12 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     this search's model (a search repeated at a tighter tolerance): reused, and counted only
     in the earlier search's evaluations.
     """
+    rtol, method, h_min, h_max = opts.rtol, opts.method, opts.h_min, opts.h_max
     own_model = model is None
     if own_model:
-        kwargs = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
-        model = build_model(scene, level=level, melting=melting, melt_width=melt_width,
-                            melt_spread=melt_spread, target=target, rtol=rtol, **kwargs)
+        model = build_model(scene, level=level, melting=opts.melting,
+                            melt_width=opts.melt_width, melt_spread=opts.melt_spread,
+                            target=opts.target, rtol=rtol, **opts.model_kwargs())
     base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
                 exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
                 error_estimate=(modelled_error(level) + x_tol
@@ -631,11 +523,8 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     coarse_evaluations = 0
     from_fast_tier = False
     if method == "brent" and h_guess is None and own_model and level >= COARSE_GAP:
-        coarse = _search(scene, rtol, level - COARSE_GAP,
-                         max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)), h_min=h_min,
-                         h_max=h_max, method=method, melting=melting,
-                         runaway_fraction=runaway_fraction, melt_width=melt_width,
-                         melt_spread=melt_spread, target=target)
+        coarse = _search(scene, opts, level - COARSE_GAP,
+                         max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)))
         coarse_evaluations = coarse.evaluations
         if coarse.censored is None:
             h_guess = coarse.critical_height
@@ -644,7 +533,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
             # The fine root lies within the coarse level's error of the coarse root.
             overshoot = 2.0 * modelled_error(level - COARSE_GAP)
     elif method == "brent" and h_guess is None and own_model:
-        fast = _fast_guess(scene, h_min, h_max, melting)
+        fast = _fast_guess(scene, h_min, h_max, opts.melting)
         if fast is not None:
             h_guess, overshoot, from_fast_tier = fast, FAST_GUESS_ERROR, True
 
@@ -658,7 +547,7 @@ def _search(scene, rtol, level, x_tol, *, h_min, h_max, method, melting, runaway
     # From the fast tier's height, a rebound whose heating fades before the exit is searched
     # from the prior of its root (FADING_FAST_SHIFT above that height): the go-side search
     # would start below the root there, and its first step up overshoots by the margin's jump.
-    fading = from_fast_tier and _exit_regime(scene) == "fading"
+    fading = from_fast_tier and exit_regime(scene) == "fading"
     # Where the root is located by the margin's signs alone (prior_bisection_root below: sliding
     # stops before rebound, or a rebound's margin jumped or its heating fades), a simulation
     # without an event by the exit stops there (until_exit; margin inf) instead of going on
