@@ -233,8 +233,6 @@ def figures(out, rows, exp, plans, budget):
                            whiskerprops={"color": color}, capprops={"color": color})
                 ax.plot([], [], color=color, label=label)
             ax.set_xticks(range(1, len(PROCEDURES) + 1), PROCEDURES, fontsize=8)
-            if i == 0 and k == 0:
-                ax.legend(fontsize=8, title="H50 90 % interval within", title_fontsize=8)
             ax.axhline(budget, color="0.5", ls=":", lw=1)
             ax.set_title(f"truths from {'the prior' if kind == 'prior' else 'outside it'}, "
                          f"{prior} prior", fontsize=9)
@@ -242,7 +240,12 @@ def figures(out, rows, exp, plans, budget):
                 ax.set_ylabel("drops needed")
     fig.suptitle("Drops needed (box: quartiles, whiskers 10-90 %; dotted: budget), "
                  "3 targets pooled", fontsize=9)
-    fig.tight_layout()
+    # The legend above the panels, where no box can lie under it.
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.965), ncol=2,
+               fontsize=8, title="stopping rule: H50 90 % interval within", title_fontsize=8,
+               frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
     fig.savefig(out / "drops_needed.png", dpi=110)
     plt.close(fig)
 
@@ -269,11 +272,20 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=43)
     parser.add_argument("--quick", action="store_true", help="2 truths, budget 20 (a smoke run)")
     parser.add_argument("--out", default="results/planning")
+    parser.add_argument("--figures-only", action="store_true",
+                        help="redraw the figures from OUT/runs.csv (no simulation)")
     args = parser.parse_args(argv)
     if args.quick:
         args.truths, args.budget = 2, 20
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.figures_only:
+        with (out / "runs.csv").open(newline="") as f:
+            rows = [{**r, "drops": int(r["drops"]), "drops_25": int(r["drops_25"])}
+                    for r in csv.DictReader(f)]
+        exp, _example, plans = worked_example()
+        figures(out, rows, exp, plans, args.budget)
+        return 0
     start, cpu_start = time.perf_counter(), time.process_time()
     rows = run(args.truths, args.budget, args.seed)
     elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu_start
