@@ -101,7 +101,7 @@ class Instrument:
                 caller = sys._getframe(1).f_code.co_name
                 phase = inst.phase[-1]
                 if caller == "_adaptive_pair":
-                    width = kw.get("melt_width")
+                    width = args[1].melt_width   # _search(scene, opts, level, x_tol, ...)
                     if inst.first_width is None:
                         inst.first_width, phase = width, "first pair"
                     elif width != inst.first_width:
@@ -116,13 +116,11 @@ class Instrument:
             return wrapped
 
         def fine(original):
-            def wrapped(scene, rtol, level, x_tol, coarse, coarse_tol, common, signs):
-                phase = ("narrow" if common["melt_width"] != inst.first_width
-                         else "first pair")
+            def wrapped(scene, opts, level, x_tol, coarse, coarse_tol):
+                phase = "narrow" if opts.melt_width != inst.first_width else "first pair"
                 inst.phase.append(phase)
                 try:
-                    return original(scene, rtol, level, x_tol, coarse, coarse_tol, common,
-                                    signs)
+                    return original(scene, opts, level, x_tol, coarse, coarse_tol)
                 finally:
                     inst.phase.pop()
             return wrapped
@@ -136,14 +134,14 @@ class Instrument:
                     inst.seconds["fast guess"] += time.perf_counter() - t0
             return wrapped
 
-        def richardson(original):
+        def pair_value(original):
             def wrapped(*args, **kw):
-                res = original(*args, **kw)
+                res, pair = original(*args, **kw)
                 inst.estimates.append(res.error_estimate)
-                return res
+                return res, pair
             return wrapped
 
-        self._wrap("_richardson", richardson)
+        self._wrap("_adaptive_value", pair_value)
         self._wrap("simulate", simulate)
         self._wrap("_search", search_)
         self._wrap("_fine_search", fine)
