@@ -570,9 +570,9 @@ def run_emcee(log_prob: Callable[[np.ndarray], np.ndarray], ndim: int, *, walker
     p0 = rng.standard_normal((walkers, ndim)) if initial is None else np.asarray(initial)
     # Differential-evolution moves (80 %) with snooker updates (20 %), emcee's suggestion for
     # correlated posteriors: on the shipped calibration's 17 parameters their integrated
-    # autocorrelation time was 53 steps (median; 65 largest) against 160 (194) for emcee's
-    # default stretch move, measured over 5000 steps of 48 walkers with 3.1.6's uncorrected
-    # snooker move (docs/calibration.md).
+    # autocorrelation time is 71 steps (median; 81 largest) against 189 (205) for emcee's
+    # default stretch move, over 5000 steps of 48 walkers
+    # (scripts/calibration_autocorrelation.py; docs/calibration.md).
     moves = [(emcee.moves.DEMove(), 0.8), (_snooker_move(), 0.2)]
     sampler = emcee.EnsembleSampler(walkers, ndim, log_prob, vectorize=True, moves=moves)
     sampler._random = np.random.mtrand.RandomState(seed)  # emcee's own RNG, seeded
