@@ -25,7 +25,6 @@ over the parameters are reported.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -37,22 +36,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def calibration_model(nodes):
     """The calibration-series1 model (with its friction population) on surrogates."""
-    import skidmc
-    from skidmc.analysis.calibration import FEATURE_TRANSFORMS, fit_surrogate
-    from skidmc.workflows.calibration import _model, load
+    sys.path.insert(0, str(ROOT / "scripts"))
+    from calibration_validation import surrogate_model
 
-    study = load(ROOT / "studies" / "calibration-series1.toml")
-    ds = skidmc.open_ensemble(ROOT / "results" / "paper-series1" / "ensemble.h5")
-    surrogates = {}
-    for sc in study.prior.scenes:
-        d = ds.sel(scene=sc.name)
-        surrogates[sc.name] = fit_surrogate(
-            {k: d[k].values.ravel() for k in FEATURE_TRANSFORMS if k in d},
-            np.log(d["critical_height"].values.ravel()), seed=1)
-    spec = study.spec.model_copy(deep=True)
-    spec.calibration.quadrature = {k: nodes for k in spec.calibration.quadrature}
-    study = dataclasses.replace(study, spec=spec, others=())
-    return _model(study, surrogates)
+    return surrogate_model(nodes, population=True)
 
 
 def move_sets():

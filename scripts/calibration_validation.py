@@ -32,6 +32,13 @@ ROOT = Path(__file__).resolve().parents[1]
 def sbc_model(nodes: int = 8):
     """The calibration-series1 model (no population) on surrogates fitted to the shipped
     ensemble."""
+    return surrogate_model(nodes, population=False)
+
+
+def surrogate_model(nodes: int, population: bool):
+    """The calibration-series1 model on surrogates of ln H_c fitted to the shipped
+    paper-series1 ensemble, ``nodes`` quadrature nodes of the friction factor, with or without
+    the study's friction population."""
     import skidmc
     from skidmc.analysis.calibration import FEATURE_TRANSFORMS, fit_surrogate
     from skidmc.workflows.calibration import _model, load
@@ -45,7 +52,8 @@ def sbc_model(nodes: int = 8):
             {k: d[k].values.ravel() for k in FEATURE_TRANSFORMS if k in d},
             np.log(d["critical_height"].values.ravel()), seed=1)
     spec = study.spec.model_copy(deep=True)
-    spec.calibration.friction_population = None
+    if not population:
+        spec.calibration.friction_population = None
     spec.calibration.quadrature = {k: nodes for k in spec.calibration.quadrature}
     study = dataclasses.replace(study, spec=spec, others=())
     return _model(study, surrogates)
