@@ -213,8 +213,8 @@ HISTORY_CAPACITY = 4096
 PREFIX_MAX_SCALE = 1.05
 #: Most accepted steps a prefix holds (the linear start takes ~25-50 at levels 0.5-1.5).
 PREFIX_STEPS = 160
-#: ``prefix_mode`` of :func:`simulate_core`: record the run's linear start into ``prefix``, or
-#: resume from the one it holds (0: neither).
+#: ``prefix_mode`` of the kernel's input record (:func:`simulate_kernel`): record the run's
+#: linear start into ``prefix``, or resume from the one it holds (0: neither).
 PREFIX_WRITE = 1
 PREFIX_RESUME = 2
 _NO_PREFIX = np.zeros(0)   # simulate_kernel's default: no prefix
