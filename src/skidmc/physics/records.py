@@ -105,8 +105,15 @@ HISTORY_T, HISTORY_QL, HISTORY_QR, HISTORY_WORK = range(4)
 HISTORY_ROWS = 4
 
 
+_INPUT_NAMES = KERNEL_INPUT.names
+_INPUT_SET = frozenset(_INPUT_NAMES)
+
+
 def kernel_input(**fields):
     """A :data:`KERNEL_INPUT` array of one record, every field given by keyword [SI].
+
+    (Built from one tuple in the dtype's order: ~5 us, against ~15 us field by field, once
+    per simulation.)
 
     Raises
     ------
@@ -114,12 +121,8 @@ def kernel_input(**fields):
         Naming the fields missing or unknown (a record with a field left unset would run on
         zeros).
     """
-    names = set(KERNEL_INPUT.names)
-    missing, unknown = names - fields.keys(), fields.keys() - names
-    if missing or unknown:
+    if fields.keys() != _INPUT_SET:
+        missing, unknown = _INPUT_SET - fields.keys(), fields.keys() - _INPUT_SET
         raise KeyError(f"kernel_input: missing fields {sorted(missing)}, "
                        f"unknown fields {sorted(unknown)}")
-    record = np.zeros(1, dtype=KERNEL_INPUT)
-    for name, value in fields.items():
-        record[name] = value
-    return record
+    return np.array([tuple(fields[name] for name in _INPUT_NAMES)], dtype=KERNEL_INPUT)

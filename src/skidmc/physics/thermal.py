@@ -35,6 +35,11 @@ above 0.99 in any cell) is checked too and ends the run if it comes first.
 Runs of one model at nearby heights can share their start (``prefix``, :data:`PREFIX_MAX_SCALE`):
 while the HE is cold and far below its melting step the discrete equations are linear in
 T - T0 and the flux scales with sqrt(H), so one run's recorded start, scaled, serves the others.
+
+The kernel takes its scalar inputs as one record and writes its outcome into another
+(:mod:`skidmc.physics.records`: ``KERNEL_INPUT``, ``KERNEL_OUTPUT``); its body,
+:func:`simulate_core`, is a sequence of steps inlined into it (docs/architecture.md, "The
+thermal kernel").
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skidmc.physics.records import kernel_input
+from skidmc.physics.records import KERNEL_OUTPUT, kernel_input
 from skidmc.physics.thermal import (
     _PX_VALID,
     PREFIX_MAX_SCALE,
@@ -223,9 +223,12 @@ def simulate(model, height, *, record=False, max_steps=None, flux_override=None,
                                              until_exit=until_exit, record_t=rec_t,
                                              record_tb=rec_tb,
                                              prefix=prefix.array if use_prefix else None,
-                                             prefix_mode=mode))[0]
-    steps = int(info["steps"])
-    rejected = int(info["rejected"])
+                                             prefix_mode=mode))
+    # The outcome as Python scalars, by field name (one conversion: ~4 us, against ~1 us per
+    # field read from the record).
+    info = dict(zip(KERNEL_OUTPUT.names, info[0].item()))
+    steps = info["steps"]
+    rejected = info["rejected"]
     if mode == PREFIX_WRITE and prefix.array[_PX_VALID] == 1.0:
         prefix.recorded_height = float(height)
     if prefix is not None:
@@ -238,18 +241,18 @@ def simulate(model, height, *, record=False, max_steps=None, flux_override=None,
         raise SolverError(
             f"time integration failed at H = {height:.6g} m after {steps} "
             f"steps ({rejected} rejected)")
-    t_ev = float(info["t_event"])
+    t_ev = info["t_event"]
     t_exit = model.exit_time
     sim = Simulation(
         height=float(height), event=bool(info["event"]) and t_ev <= t_exit,
         event_time=t_ev, exit_time=t_exit,
         margin=math.log(t_ev / t_exit) if np.isfinite(t_ev) else math.inf,
         steps=steps, rejected=rejected,
-        max_temperature=float(info["t_max"]),
-        exit_max_temperature=float(info["t_exit_max"]),
-        exit_max_reacted=float(info["y_exit_max"]),
-        newton_iterations=int(info["newton_iterations"]),
-        resumed_steps=int(info["resumed_steps"]),
+        max_temperature=info["t_max"],
+        exit_max_temperature=info["t_exit_max"],
+        exit_max_reacted=info["y_exit_max"],
+        newton_iterations=info["newton_iterations"],
+        resumed_steps=info["resumed_steps"],
     )
     if record:
         n = min(steps, rec_t.shape[0])
