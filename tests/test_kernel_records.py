@@ -43,8 +43,11 @@ def test_the_device_search_fills_every_input_field():
 
 
 def test_kernel_input_names_what_is_missing_or_unknown():
-    fields = dict.fromkeys(KERNEL_INPUT.names, 1.0)
-    assert kernel_input(**fields)["q0"][0] == 1.0
+    fields = {name: 1 if KERNEL_INPUT[name].kind == "i" else 1.5 for name in KERNEL_INPUT.names}
+    record = kernel_input(**fields)[0]
+    assert all(record[name] == value for name, value in fields.items())
+    with pytest.raises(TypeError, match="max_steps"):
+        kernel_input(**{**fields, "max_steps": 1.5})
     del fields["t_stop"]
     with pytest.raises(KeyError, match="t_stop"):
         kernel_input(**fields)
