@@ -190,7 +190,7 @@ MELT_SPREAD = 1.0
 #   (:func:`_linear_at_scale`): the heat its step holds must stay below
 #   :data:`COLD_SOURCE_FRACTION` of the run's step tolerance, the criterion ``t_cold`` applies
 #   to the reaction, so the threshold follows the tolerance: :func:`prefix_melt_z`,
-#   z < 0.5 ln(COLD_SOURCE_FRACTION tol c / L) (about -6.5 at level 0 to -10.6 at level 4 for
+#   z < 0.5 ln(COLD_SOURCE_FRACTION tol c / L) (-6.4 at level 0 to -10.5 at level 4 for
 #   HMX). It decides how far a prefix reaches, never how a step is computed.
 #
 # One threshold for both would change results: -_SETTLED_Z for the prefix ends every prefix
