@@ -50,7 +50,6 @@ from solver import PRESETS, off_preset_scenes  # noqa: E402
 from timing import best_time  # noqa: E402
 
 import skidmc.physics.thermal as thermal  # noqa: E402
-from skidmc.physics.thermal import INFO_STEPS, INFO_T_EVENT  # noqa: E402
 from skidmc.scene import get_preset  # noqa: E402
 from skidmc.solver import build_model, critical_height  # noqa: E402
 from skidmc.solver.simulate import kernel_arguments  # noqa: E402
@@ -93,7 +92,7 @@ def kernel_rows(modules, scenes, calls):
                                 melt_spread=thermal.MELT_SPREAD)
             for factor in (0.995, 1.005):
                 args = kernel_arguments(model, factor * height)
-                info = {name: m.simulate_kernel(*args) for name, m in modules.items()}
+                info = {name: m.simulate_kernel(*args)[0] for name, m in modules.items()}
                 best = {name: math.inf for name in modules}
                 for _ in range(calls):
                     for name, m in modules.items():
@@ -103,9 +102,9 @@ def kernel_rows(modules, scenes, calls):
                 base = info["python"]
                 rows.append(dict(
                     scene=label, level=level, factor=factor, best=best,
-                    event_change={n: _rel(i[INFO_T_EVENT], base[INFO_T_EVENT])
+                    event_change={n: _rel(i["t_event"], base["t_event"])
                                   for n, i in info.items()},
-                    steps_change={n: int(i[INFO_STEPS] - base[INFO_STEPS])
+                    steps_change={n: int(i["steps"] - base["steps"])
                                   for n, i in info.items()}))
     return rows
 

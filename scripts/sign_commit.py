@@ -36,12 +36,6 @@ import sys
 from pathlib import Path
 
 from skidmc.physics.thermal import (
-    INFO_EVENT,
-    INFO_REJECTED,
-    INFO_STEPS,
-    INFO_T_EVENT,
-    INFO_T_EXIT_MAX,
-    INFO_T_MAX,
     MELT_SPREAD,
     SIGN_COMMIT_FRACTION,
     SIGN_COMMIT_GUARD,
@@ -70,14 +64,15 @@ COMMIT = {"fraction": SIGN_COMMIT_FRACTION}
 
 
 def _run(model, height, commit):
-    """Kernel info of the sign-only run at ``height`` [m], with or without the commit rule."""
+    """The kernel's outcome record (:data:`skidmc.physics.records.KERNEL_OUTPUT`) of the
+    sign-only run at ``height`` [m], with or without the commit rule."""
     return simulate_kernel(*kernel_arguments(
         model, height, until_exit=True,
-        sign_commit_fraction=COMMIT["fraction"] if commit else 0.0))
+        sign_commit_fraction=COMMIT["fraction"] if commit else 0.0))[0]
 
 
 def _is_go(info, t_exit):
-    return bool(info[INFO_EVENT]) and info[INFO_T_EVENT] <= t_exit
+    return bool(info["event"]) and info["t_event"] <= t_exit
 
 
 def sweep(item):
@@ -102,12 +97,12 @@ def sweep(item):
                 go = _is_go(plain, t_exit)
                 row = dict(level=level, width=width, offset=offset, go=go,
                            agree=go == _is_go(committed, t_exit), exit_kind=model.exit_kind,
-                           plain_attempts=plain[INFO_STEPS] + plain[INFO_REJECTED],
-                           commit_attempts=committed[INFO_STEPS] + committed[INFO_REJECTED],
+                           plain_attempts=int(plain["steps"] + plain["rejected"]),
+                           commit_attempts=int(committed["steps"] + committed["rejected"]),
                            peak_fraction=math.nan)
-                if not go and plain[INFO_T_EXIT_MAX] < plain[INFO_T_MAX] - PEAKED_DROP:
+                if not go and plain["t_exit_max"] < plain["t_max"] - PEAKED_DROP:
                     row["peak_fraction"] = adiabatic_induction_time(
-                        plain[INFO_T_MAX], model.prefactor, model.activation_temperature,
+                        plain["t_max"], model.prefactor, model.activation_temperature,
                         rise) / t_exit
                 rows.append(row)
     return kind, index, rows

@@ -14,8 +14,6 @@ from skidmc.physics.thermal import (
     _PX_T,
     _PX_T_MAX,
     _PX_VALID,
-    INFO_STEPS,
-    INFO_T_MAX,
     PREFIX_MAX_SCALE,
     PREFIX_RESUME,
     simulate_kernel,
@@ -68,15 +66,15 @@ def test_prefix_is_the_run_at_another_height_with_its_steps(recorded, scale):
     # linearity the prefix rests on, checked through the hottest cell and the step count.
     model, height, prefix = recorded
     other = height * scale**2
-    args = list(kernel_arguments(model, other))
-    args[22] = model.resolution.tol_temperature * scale      # tol_temperature
-    args[20] = prefix.array[_PX_T]                              # t_stop: the prefix's end
-    info = simulate_kernel(*args)
+    args = kernel_arguments(model, other)
+    args[3]["tol_temperature"] = model.resolution.tol_temperature * scale
+    args[3]["t_stop"] = prefix.array[_PX_T]                    # the prefix's end
+    info = simulate_kernel(*args)[0]
     t0 = model.initial_temperature
     expected = t0 + scale * (prefix.array[_PX_T_MAX] - t0)
-    assert info[INFO_STEPS] == prefix.array[_PX_STEPS]
+    assert info["steps"] == prefix.array[_PX_STEPS]
     # Relative to the rise T - T0 (~150 K): rounding of ~50 steps' sums, 1e-12 each.
-    assert abs(info[INFO_T_MAX] - expected) <= 1e-9 * (expected - t0)
+    assert abs(info["t_max"] - expected) <= 1e-9 * (expected - t0)
 
 
 def test_resumed_run_at_the_recorded_height_is_the_run(recorded):
@@ -102,10 +100,12 @@ def test_heights_outside_the_scale_and_other_models_start_at_zero(recorded):
     # Another level (another mesh): the kernel itself refuses the prefix, runs from t = 0.
     finer = build_model(get_preset("paper-quartz"), level=1.5, melt_width=1.0, melt_spread=1.0,
                         target="exact")
-    args = list(kernel_arguments(finer, height, prefix=prefix.array,
-                                      prefix_mode=PREFIX_RESUME))
-    plain = simulate_kernel(*kernel_arguments(finer, height))
-    assert np.array_equal(simulate_kernel(*args), plain, equal_nan=True)
+    args = kernel_arguments(finer, height, prefix=prefix.array, prefix_mode=PREFIX_RESUME)
+    plain = simulate_kernel(*kernel_arguments(finer, height))[0]
+    resumed = simulate_kernel(*args)[0]
+    assert resumed["resumed_steps"] == 0
+    for field in plain.dtype.names:   # every field, nan (none reached) equal to nan
+        assert np.array_equal(resumed[field], plain[field], equal_nan=True), field
 
 
 def test_resumed_runs_stay_within_the_levels_step_noise(recorded):

@@ -9,14 +9,7 @@ import sys
 
 import pytest
 
-from skidmc.physics.thermal import (
-    INFO_EVENT,
-    INFO_NEWTON_ITERATIONS,
-    INFO_STEPS,
-    INFO_T_EVENT,
-    SIGN_COMMIT_FRACTION,
-    simulate_kernel,
-)
+from skidmc.physics.thermal import SIGN_COMMIT_FRACTION, simulate_kernel
 from skidmc.scene import get_preset
 from skidmc.scene.validation import off_preset_scenes
 from skidmc.solver import build_model, critical_height, simulate
@@ -43,12 +36,12 @@ def test_stopping_at_the_exit_keeps_the_run_up_to_it(gold):
         full = simulate(model, factor * h_c)
         # The commit rule off (next test).
         info = simulate_kernel(*kernel_arguments(model, factor * h_c, until_exit=True,
-                                                 sign_commit_fraction=0.0))
-        assert full.event and info[INFO_EVENT]
+                                                 sign_commit_fraction=0.0))[0]
+        assert full.event and info["event"]
         # The same steps up to the event, so the same event time to the last bit.
-        assert info[INFO_T_EVENT] == full.event_time
-        assert info[INFO_STEPS] == full.steps
-        assert info[INFO_NEWTON_ITERATIONS] == full.newton_iterations
+        assert info["t_event"] == full.event_time
+        assert info["steps"] == full.steps
+        assert info["newton_iterations"] == full.newton_iterations
     for factor in (0.97, 0.99):          # no-go side: no event by the exit
         full = simulate(model, factor * h_c)
         short = simulate(model, factor * h_c, until_exit=True)
@@ -94,8 +87,8 @@ def test_the_commit_rule_needs_its_fraction_below_the_fold(fraction):
     flipped = 0
     for factor in (0.9999, 0.999, 0.995, 0.99):
         info = simulate_kernel(*kernel_arguments(model, factor * h_c, until_exit=True,
-                                                 sign_commit_fraction=fraction))
-        flipped += bool(info[INFO_EVENT]) and info[INFO_T_EVENT] <= model.exit_time
+                                                 sign_commit_fraction=fraction))[0]
+        flipped += bool(info["event"]) and info["t_event"] <= model.exit_time
     if fraction == SIGN_COMMIT_FRACTION:
         assert flipped == 0
     else:

@@ -29,7 +29,7 @@ import numpy as np
 
 from skidmc.errors import SceneError
 from skidmc.physics.fast import N_TIMES
-from skidmc.physics.thermal import INFO_SIZE
+from skidmc.physics.records import KERNEL_RUN
 from skidmc.solver.device import MAX_CELLS, WORK_ROWS, critical_height_core
 
 __all__ = [
@@ -104,7 +104,7 @@ def _thread(rows, rtol, h_min, h_max, level, melt_width, melt_spread, x_tol, mel
         # The thread's whole state: mesh, integrator arrays, search brackets (local memory).
         work = cuda.local.array(_WORK_SHAPE, np.float64)
         fast_work = cuda.local.array(_FAST_SHAPE, np.float64)
-        info = cuda.local.array(INFO_SIZE, np.float64)
+        info = cuda.local.array(1, KERNEL_RUN)   # the current run's input and outcome
         coarse = cuda.local.array(8, np.float64)
         fine = cuda.local.array(8, np.float64)
         _core(rows[i], rtol, h_min, h_max, level, melt_width, melt_spread, x_tol, melting,

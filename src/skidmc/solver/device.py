@@ -58,15 +58,8 @@ from skidmc.physics.fast import (
 )
 from skidmc.physics.mechanics import STANDARD_GRAVITY, contact_pressure, impact_constants
 from skidmc.physics.meshes import fill_meshes
-from skidmc.physics.thermal import (
-    INFO_EVENT,
-    INFO_FAILED,
-    INFO_REJECTED,
-    INFO_SIZE,
-    INFO_STEPS,
-    INFO_T_EVENT,
-    simulate_core,
-)
+from skidmc.physics.records import KERNEL_RUN, STATE_ROWS
+from skidmc.physics.thermal import simulate_core
 from skidmc.solver.controller import (
     DONE,
     MAX_ADAPTIVE_ROUNDS,
@@ -112,9 +105,10 @@ __all__ = [
 DEVICE_MAX_LEVEL = 3.0
 #: Cells of the largest mesh a device search builds (both media).
 MAX_CELLS = 2 * int(round(BASE_RESOLUTION.cells_per_medium * 2.0**DEVICE_MAX_LEVEL))
-#: Rows of the work array: 14 for the integrator's state, then width, rho c, face conductance.
-WORK_ROWS = 17
-_ROW_WIDTH, _ROW_RHO_C, _ROW_FACE = 14, 15, 16
+#: Rows of the work array: the integrator's state (rows ``STATE_*`` of
+#: :mod:`skidmc.physics.records`), then width, rho c, face conductance.
+_ROW_WIDTH, _ROW_RHO_C, _ROW_FACE = STATE_ROWS, STATE_ROWS + 1, STATE_ROWS + 2
+WORK_ROWS = STATE_ROWS + 3
 #: Most simulations one search at one level may use before it gives up (to the CPU search).
 MAX_SEARCH_EVALUATIONS = 60
 
@@ -181,26 +175,56 @@ def run_cap(tol_temperature, most):
 def _margin(x, row, sc, n_cells, share, tol_temperature, melt_width, work, info):
     """Margin ln(t_ev / t_exit) at H = exp(x) [1], capped at the horizon ln(t_end / t_exit)
     (no event); NaN when the integration fails or stalls (:func:`run_cap`; the search then
-    goes to the CPU). Updates ``sc[_S_MOST]``, the most attempts of the search's runs."""
+    goes to the CPU). Updates ``sc[_S_MOST]``, the most attempts of the search's runs.
+
+    ``info`` (shape (1,), dtype :data:`skidmc.physics.records.KERNEL_RUN`) holds the run's
+    input record, filled here, and its outcome; ``work`` the mesh and the integrator's state
+    (:data:`WORK_ROWS`). The target is meshed with constant properties (tables go to the CPU
+    search), no linear prefix, nothing recorded.
+    """
     cap = run_cap(tol_temperature, sc[_S_MOST])
     q0 = sc[_S_FLUX] * math.sqrt(math.exp(x))
-    simulate_core(work[_ROW_WIDTH], work[_ROW_RHO_C], work[_ROW_FACE], 2 * n_cells, n_cells,
-                  share, row[_HE_RHO], sc[_S_LATENT], row[_HE_TM], melt_width, sc[_S_SPREAD],
-                  row[_Z],
-                  row[_TA], row[_Q], q0, sc[_S_SLIDE_S], sc[_S_SLIDE_C], sc[_S_OMEGA],
-                  sc[_S_T_EXIT], q0 * sc[_S_EXTENSION], sc[_S_T_END], sc[_S_T_END], row[_T0],
-                  tol_temperature, 1e-6 * sc[_S_T_EXIT], sc[_S_RUNAWAY], cap, work[0],
-                  work[0], 0, work[0], work[1], work[2], work[3], work[4], work[5], work[6],
-                  work[7], work[8], work[9], work[10], work[11], work[12], work[13], info,
-                  0.0, 0.0, work[0], work[0], work[0], work[0], 0.0,  # the meshed target
-                  work[0], 0,  # no linear prefix
-                  work[0], 0)  # constant target properties (tables go to the CPU search)
+    run = info[0]
+    inp = run.input
+    inp.n = 2 * n_cells
+    inp.n_target = n_cells
+    inp.q_share_he = share
+    inp.he_density = row[_HE_RHO]
+    inp.latent_heat = sc[_S_LATENT]
+    inp.melting_point = row[_HE_TM]
+    inp.melt_width = melt_width
+    inp.melt_spread = sc[_S_SPREAD]
+    inp.prefactor = row[_Z]
+    inp.activation_temperature = row[_TA]
+    inp.heat_of_reaction = row[_Q]
+    inp.q0 = q0
+    inp.slide_s = sc[_S_SLIDE_S]
+    inp.slide_c = sc[_S_SLIDE_C]
+    inp.omega = sc[_S_OMEGA]
+    inp.t_exit = sc[_S_T_EXIT]
+    inp.q_ext = q0 * sc[_S_EXTENSION]
+    inp.t_end = sc[_S_T_END]
+    inp.t_stop = sc[_S_T_END]
+    inp.initial_temperature = row[_T0]
+    inp.tol_temperature = tol_temperature
+    inp.dt_initial = 1e-6 * sc[_S_T_EXIT]
+    inp.runaway_fraction = sc[_S_RUNAWAY]
+    inp.max_steps = cap
+    inp.n_record = 0
+    inp.target_effusivity = 0.0
+    inp.he_conductivity = 0.0
+    inp.sign_commit_fraction = 0.0
+    inp.prefix_mode = 0
+    inp.n_table = 0
+    res = run.output
+    simulate_core(inp, res, work[_ROW_WIDTH], work[_ROW_RHO_C], work[_ROW_FACE], work, work,
+                  work[0], work[0], work[0], work[0])
     horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
-    attempts = info[INFO_STEPS] + info[INFO_REJECTED]
+    attempts = res.steps + res.rejected
     sc[_S_MOST] = max(sc[_S_MOST], attempts)
-    if info[INFO_FAILED] > 0.0 or (attempts >= cap and not info[INFO_EVENT] > 0.0):
+    if res.failed or (attempts >= cap and not res.event):
         return math.nan
-    t_ev = info[INFO_T_EVENT]
+    t_ev = res.t_event
     if not (t_ev < math.inf):
         return horizon
     return min(math.log(t_ev / sc[_S_T_EXIT]), horizon)
@@ -389,7 +413,8 @@ def critical_height_core(row, rtol, h_min, h_max, level, melt_width, melt_spread
         The fast tier's melt table and Gauss-Legendre nodes and weights (first guess).
     work : ndarray, shape (WORK_ROWS, >= MAX_CELLS)
     fast_work : ndarray, shape (3, >= N_TIMES)
-    info : ndarray, shape (INFO_SIZE,)
+    info : ndarray, shape (1,), dtype :data:`skidmc.physics.records.KERNEL_RUN`
+        The record of the search's current run (:func:`_margin`).
     coarse, fine : ndarray, shape (8,)
         Scratch for the two searches of the pair.
     out : ndarray, shape (OUT_SIZE,)
@@ -542,7 +567,7 @@ def critical_heights_cpu(rows, rtol, h_min, h_max, level, melt_width, melt_sprea
     for i in prange(rows.shape[0]):
         work = np.empty((WORK_ROWS, MAX_CELLS))
         fast_work = np.empty((3, N_TIMES))
-        info = np.empty(INFO_SIZE)
+        info = np.empty(1, dtype=KERNEL_RUN)   # every field written before it is read
         coarse = np.empty(8)
         fine = np.empty(8)
         critical_height_core(rows[i], rtol, h_min, h_max, level, melt_width, melt_spread, x_tol,
