@@ -132,3 +132,34 @@ def test_a_large_growth_is_sized_up_to_n_max_and_needs_confirming(tmp_path, caps
     err = capsys.readouterr().err
     assert status == 2 and "--yes" in err and "GB" in err and "up to 1048576" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["g.toml"]
+
+
+def test_the_report_says_whether_the_growths_stopping_rule_held(tmp_path):
+    # A growth cut off by n_max (N = 8 to 16, a half-width rule no N that small meets) and one
+    # that stops stable: the report states the rule's verdict at the ensemble's N, with the
+    # widest half-width where it failed (read from convergence.json beside the result).
+    from skidmc.workflows.reporting.ensemble import write_report
+
+    for name, text, verdict in (
+            ("cut", GROWING.replace("n_max = 8192", "n_max = 16").replace(
+                "stable_half_width = 0.1", "stable_half_width = 0.001"), "**not met** for grow"),
+            ("stable", GROWING, "met for every scene")):
+        folder = tmp_path / name
+        folder.mkdir()
+        study = folder / "grow.toml"
+        study.write_text(text)
+        steps = run_until_stable(study, folder / "ensemble.h5", workers=1, progress=False,
+                                 solver=fake_height, resamples=200, log=lambda line: None)
+        write_report(open_ensemble(folder / "ensemble.h5"), folder)
+        summary = (folder / "summary.md").read_text()
+        assert f"At N = {steps[-1]['n']}" in summary and verdict in summary
+        if name == "cut":
+            assert steps[-1]["n"] == 16
+            assert f"widest half-width {steps[-1]['max_half_width']['grow']:.3f}" in summary
+    # A record of another N (the file regrown since) is not reported.
+    (tmp_path / "stable" / "convergence.json").write_text(json.dumps(
+        {"threshold": 0.1, "half_width": 0.1, "n_max": 8, "steps": [
+            {"n": 8, "rows": 40, "new_rows": 40, "stable": {"grow": False},
+             "max_half_width": {"grow": 0.5}}], "stable": False}))
+    write_report(open_ensemble(tmp_path / "stable" / "ensemble.h5"), tmp_path / "stable")
+    assert "Stopping rule" not in (tmp_path / "stable" / "summary.md").read_text()
