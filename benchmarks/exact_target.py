@@ -46,7 +46,7 @@ from solver import PRESETS, off_preset_scenes  # noqa: E402
 from skidmc.physics.thermal import MELT_SPREAD, simulate_kernel  # noqa: E402
 from skidmc.scene import get_preset  # noqa: E402
 from skidmc.solver import build_model, critical_height  # noqa: E402
-from skidmc.solver.search import _exit_regime  # noqa: E402
+from skidmc.solver.options import exit_regime  # noqa: E402
 from skidmc.solver.simulate import kernel_arguments  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
@@ -70,7 +70,7 @@ def height(scene, level, target):
 
 def levels(label, scene):
     """Level errors and pairs of both targets for one scene."""
-    row = {"scene": label, "regime": _exit_regime(scene)}
+    row = {"scene": label, "regime": exit_regime(scene)}
     for target in TARGETS:
         h = {level: height(scene, level, target) for level in LEVELS + (REFERENCE_LEVEL,)}
         ref = h[REFERENCE_LEVEL]

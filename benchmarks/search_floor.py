@@ -53,8 +53,8 @@ from timing import median_time  # noqa: E402
 from skidmc.physics.thermal import MELT_SPREAD  # noqa: E402
 from skidmc.scene import get_preset  # noqa: E402
 from skidmc.solver import build_model, critical_height, simulate  # noqa: E402
+from skidmc.solver.options import exit_regime  # noqa: E402
 from skidmc.solver.plan import first_pair_level, melt_width_for_rtol  # noqa: E402
-from skidmc.solver.search import _exit_regime  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
 RTOLS = (1e-2, 1e-3)
@@ -69,7 +69,7 @@ def measure(label, scene, rtol, repeats):
     """One row: the default search's cost against one simulation per level of its pair."""
     critical_height(scene, rtol=rtol)   # compile and warm the caches
     t_height, res = median_time(lambda: critical_height(scene, rtol=rtol), repeats)
-    by_signs = _exit_regime(scene) != "steady"
+    by_signs = exit_regime(scene) != "steady"
     row = dict(scene=label, rtol=rtol, level=res.level, simulations=res.evaluations,
                height_ms=1e3 * t_height, censored=res.censored, by_signs=by_signs)
     if res.censored or not res.extrapolated:

@@ -38,7 +38,7 @@ from solver import PRESETS, off_preset_scenes  # noqa: E402
 
 from skidmc.scene import get_preset  # noqa: E402
 from skidmc.solver import critical_height, simulate  # noqa: E402
-from skidmc.solver.search import _exit_regime  # noqa: E402
+from skidmc.solver.options import exit_regime  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
 RTOLS = (1e-2, 3e-3, 1e-3)
@@ -64,7 +64,7 @@ def measure(scenes, rtol, repeats):
     differing heights: (H_A [m], H_B [m], estimate A [1], estimate B [1]) or None."""
     rows = []
     for label, scene in scenes:
-        regime = _exit_regime(scene)
+        regime = exit_regime(scene)
         differing = None
         _timed(scene, rtol, simulate)   # warm-up
         times_a, times_b = [], []

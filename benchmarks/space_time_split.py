@@ -13,7 +13,7 @@ first Richardson pair (0.5 and 1.5):
   reference, level 3's mesh and tolerance;
 * **space**: level L's mesh with level 3's tolerance; **time**: level 3's mesh with level L's
   tolerance (as in cost_breakdown.py part 1);
-* the scene's **regime** (``skidmc.solver.search._exit_regime``): "steady" rebounds, whose root
+* the scene's **regime** (``skidmc.solver.options.exit_regime``): "steady" rebounds, whose root
   the search finds along the margin's go side, against "stops_sliding" and "fading" ones, whose
   margin jumps at the root and is located by its signs;
 * **one level looser in time at L = 1.5**: level 1.5's mesh with level 0.5's tolerance, the
@@ -49,7 +49,7 @@ from solver import PRESETS, off_preset_scenes  # noqa: E402
 from skidmc.physics.thermal import MELT_SPREAD  # noqa: E402
 from skidmc.scene import get_preset  # noqa: E402
 from skidmc.solver import build_model, simulate  # noqa: E402
-from skidmc.solver.search import _exit_regime  # noqa: E402
+from skidmc.solver.options import exit_regime  # noqa: E402
 
 OUT = ROOT / "results" / "benchmarks"
 REFERENCE_LEVEL = 3.0
@@ -82,7 +82,7 @@ def measure(label, scene):
         return heights[key]
 
     ref = h(REFERENCE_LEVEL, REFERENCE_LEVEL)
-    out = {"scene": label, "regime": _exit_regime(scene), "levels": {}}
+    out = {"scene": label, "regime": exit_regime(scene), "levels": {}}
     for level in LEVELS:
         out["levels"][level] = (h(level, level) / ref - 1.0,
                                 h(level, REFERENCE_LEVEL) / ref - 1.0,

@@ -157,9 +157,9 @@ class Instrument:
 
 def regime(scene):
     """How the scene's heating ends (the search's own classification)."""
-    from skidmc.solver import search
+    from skidmc.solver.options import exit_regime
 
-    return search._exit_regime(scene)
+    return exit_regime(scene)
 
 
 def times_only(scenes, repeat, rtol):

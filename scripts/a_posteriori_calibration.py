@@ -41,8 +41,8 @@ from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.scene import get_preset, make_scene
 from skidmc.scene.validation import off_preset_scenes
 from skidmc.solver import build_model, critical_height
+from skidmc.solver.options import TARGETS, exit_regime
 from skidmc.solver.plan import modelled_error
-from skidmc.solver.search import TARGETS, _exit_regime
 
 OUT = Path(__file__).resolve().parents[1] / "results" / "validation"
 LEVELS = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)
@@ -90,7 +90,7 @@ def measure(item):
     from skidmc.solver.fast import fast_critical_height
 
     fast = fast_critical_height(scene)
-    row = {"scene": label, "regime": _exit_regime(scene),
+    row = {"scene": label, "regime": exit_regime(scene),
            "fast": fast.critical_height if fast.censored is None else math.nan}
     for width in WIDTHS:
         for level in LEVELS:

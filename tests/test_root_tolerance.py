@@ -19,15 +19,14 @@ import pytest
 from skidmc.physics.thermal import MELT_SPREAD
 from skidmc.scene import get_preset
 from skidmc.scene.validation import off_preset_scenes
+from skidmc.solver.options import exit_regime, margin_likely_jumps
 from skidmc.solver.plan import modelled_error
 from skidmc.solver.search import (
     FADING_FAST_SHIFT,
     FADING_FAST_SPREAD,
     FINE_SHIFT_SPREAD,
     SearchOptions,
-    _exit_regime,
     _fast_guess,
-    _margin_likely_jumps,
     _search,
 )
 
@@ -62,7 +61,7 @@ def test_roots_are_within_their_tolerance(level, width, x_tol):
 # training set). The off-preset box's fading scenes (seeds 16 and 17) are outside that set.
 FADING = [(label, scene) for seed, n in ((16, 16), (17, 24))
           for label, scene in off_preset_scenes(n, seed=seed)
-          if _exit_regime(scene) == "fading"]
+          if exit_regime(scene) == "fading"]
 
 
 def test_the_box_has_fading_rebound_scenes():
@@ -85,7 +84,7 @@ def test_fading_rebound_prior_and_root(label, scene):
 
 
 JUMPING_HELD_OUT = [(label, scene) for label, scene in off_preset_scenes(8, seed=18)
-                    if _margin_likely_jumps(scene)]
+                    if margin_likely_jumps(scene)]
 
 
 @pytest.mark.parametrize(("label", "scene"), JUMPING_HELD_OUT,

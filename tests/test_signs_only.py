@@ -13,8 +13,8 @@ from skidmc.physics.thermal import SIGN_COMMIT_FRACTION, simulate_kernel
 from skidmc.scene import get_preset
 from skidmc.scene.validation import off_preset_scenes
 from skidmc.solver import build_model, critical_height, simulate
+from skidmc.solver.options import exit_regime
 from skidmc.solver.roots import margin_slope
-from skidmc.solver.search import _exit_regime
 from skidmc.solver.simulate import kernel_arguments
 
 # The module, not the function the package re-exports under the same name.
@@ -100,7 +100,7 @@ def _fading_scene():
     below FADING_EXIT_SPEED of the initial one; its margin jumps at the root at levels 0.5 and
     1.5 (slopes of -600 to -900 across the brackets of full runs)."""
     scene = dict(off_preset_scenes())["alumina-vertical-1"]
-    assert _exit_regime(scene) == "fading"
+    assert exit_regime(scene) == "fading"
     return scene
 
 

@@ -48,7 +48,6 @@ from skidmc.solver.options import (
     TARGETS,
     SearchOptions,
     exit_regime,
-    margin_likely_jumps,
     resolve_options,
 )
 from skidmc.solver.plan import (
@@ -373,11 +372,6 @@ def _adaptive_pair(scene, opts, h_guess, start):
     res.evaluations = evaluations
     res.wall_time = time.perf_counter() - start
     return res
-
-
-# Kept under their old names: benchmarks and scripts import them from here.
-_margin_likely_jumps = margin_likely_jumps
-_exit_regime = exit_regime
 
 
 def _tighten(scene, opts, search, old_tol, tol):
