@@ -323,6 +323,7 @@ def test_a_run_is_capped_at_ten_times_its_search_s_earlier_runs():
     from skidmc.solver.simulate import (
         STALL_FACTOR,
         STALL_FLOOR,
+        STALL_FLOOR_LEVEL0,
         LinearPrefix,
         simulate,
         stall_cap,
@@ -338,6 +339,12 @@ def test_a_run_is_capped_at_ten_times_its_search_s_earlier_runs():
         STALL_FLOOR, STALL_FACTOR * prefix.most_attempts))
     prefix.most_attempts = 1000  # as if an earlier run had taken 1,000 attempts
     assert stall_cap(model, prefix) == STALL_FACTOR * 1000 < step_cap(model)
+    # Above level 1 the floor grows as 2^level: at level 3, after runs of 195 attempts, the
+    # slow error-estimate reference's run of 4,238 (a legitimate one) is not cut at 4,000.
+    fine = build_model(get_preset("paper-quartz"), level=3.0)
+    fine_prefix = LinearPrefix(fine)
+    fine_prefix.most_attempts = 195
+    assert stall_cap(fine, fine_prefix) == STALL_FLOOR_LEVEL0 * 8 > 4_238 > STALL_FLOOR
     other = build_model(get_preset("paper-quartz"), level=0.0)
     assert stall_cap(other, prefix) == step_cap(other)  # another model's prefix: no history
 

@@ -84,7 +84,13 @@ from skidmc.solver.model import (
 )
 from skidmc.solver.plan import modelled_error
 from skidmc.solver.roots import FAST_GUESS_ERROR
-from skidmc.solver.simulate import MAX_STEPS, STALL_ATTEMPTS_LEVEL0, STALL_FACTOR, STALL_FLOOR
+from skidmc.solver.simulate import (
+    MAX_STEPS,
+    STALL_ATTEMPTS_LEVEL0,
+    STALL_FACTOR,
+    STALL_FLOOR,
+    STALL_FLOOR_LEVEL0,
+)
 
 __all__ = [
     "DEVICE_MAX_LEVEL",
@@ -160,14 +166,15 @@ def run_cap(tol_temperature, most):
 
     The rule of the CPU search (:func:`skidmc.solver.simulate.stall_cap`, the same constants):
     :data:`~skidmc.solver.simulate.STALL_ATTEMPTS_LEVEL0` x 2^level, at most ``MAX_STEPS``,
-    and :data:`~skidmc.solver.simulate.STALL_FACTOR` x ``most`` (at least ``STALL_FLOOR``)
-    once the search has run. A stalled run makes the search go to the CPU search, which fails
-    the sample with its reason as fast.
+    and :data:`~skidmc.solver.simulate.STALL_FACTOR` x ``most`` (at least ``STALL_FLOOR`` and
+    ``STALL_FLOOR_LEVEL0`` x 2^level) once the search has run. A stalled run makes the search
+    go to the CPU search, which fails the sample with its reason as fast.
     """
     level = max(0.0, math.log2(_BASE_TOL_TEMPERATURE / tol_temperature) / 3.0)
     cap = int(min(MAX_STEPS, STALL_ATTEMPTS_LEVEL0 * 2.0 ** level))
     if most > 0:
-        cap = min(cap, max(STALL_FLOOR, STALL_FACTOR * int(most)))
+        floor = int(max(STALL_FLOOR, STALL_FLOOR_LEVEL0 * 2.0 ** level))
+        cap = min(cap, max(floor, STALL_FACTOR * int(most)))
     return cap
 
 
