@@ -328,8 +328,9 @@ def markdown(args, scenes, rows, base, load_before, load_after):
                          + " | ".join(f"{100 * s:.0f} %" for s in shares)
                          + f" | {runs:.1f} | {att:.0f} |")
     lines += ["", "## What a refinement costs, and what skipping it would give up", "",
-              "A scene refines when its first pair's a posteriori estimate exceeds rtol and the "
-              "roots alone cannot bring it within (the pair moves one level up). Time without "
+              "A scene refines when its first pair's a posteriori estimate exceeds rtol and no "
+              "tightening of its roots can bring it within, however far the re-searched roots "
+              "move (`controller.bounded_tightening`; the pair moves one level up). Time without "
               "the refine phase: each scene's time x (1 - its refine share); the first pair's "
               "estimate is what such a scene would report instead (flag rtol_unmet).", "",
               "| rtol | scenes refined | their share of the time | mean, median, p90, max "

@@ -46,6 +46,7 @@ __all__ = [
     "STOP",
     "TIGHTEN_BOTH",
     "TIGHTEN_FINE",
+    "bounded_tightening",
     "first_root_tolerances",
     "next_round",
     "pair_estimate",
@@ -59,6 +60,20 @@ MAX_ADAPTIVE_ROUNDS = 8
 
 #: Most times the melting width of one search is narrowed (:data:`NARROW`).
 MAX_NARROWINGS = 2
+
+#: Aim of :func:`bounded_tightening`: its bound on the tightened estimate [fraction of rtol].
+#: The bound already takes the roots' largest move to first order; what it neglects is second
+#: order in the root tolerances t (ln H against relative height, products of moves: ~t^2, with
+#: t <= rtol at most 1e-2 of rtol at rtol 1e-2, 1e-3 at rtol 1e-3).
+BOUNDED_AIM = 0.99
+#: Smallest fine root tolerance :func:`bounded_tightening` asks for [fraction of rtol]: below it
+#: the pair moves up a level. A jumping margin pays one simulation per halving of its bracket:
+#: from the first fine tolerance (~0.1-0.2 rtol) to 0.02 rtol is ~3 halvings at the fine
+#: level, against the 2-6 simulations at a level 4x dearer a refinement costs.
+BOUNDED_MIN_ROOT = 0.005
+#: Coarse to fine root tolerance where :func:`bounded_tightening` tightens both (the ratio of
+#: the first pair's tolerances, :func:`first_root_tolerances`: the fine root weighs 4x).
+BOUNDED_COARSE_RATIO = 2.0
 
 #: Decisions of :func:`next_round`.
 #: DONE: the estimate is within rtol. TIGHTEN_FINE: search the fine root again at a tighter
@@ -118,6 +133,54 @@ def pair_estimate(correction, coarse_level, melt_spread, exact, signs, melt_bias
 
 
 @njit(cache=True)
+def bounded_tightening(rtol, pair, melt_bias, correction, coarse_level, coarse_tol, fine_tol,
+                       melt_spread, exact, signs):
+    """Root tolerances that bring a pair's estimate within rtol whatever its roots move [1].
+
+    Where the room a pair leaves (rtol less its a posteriori part ``pair`` and the melting
+    width's bias ``melt_bias``) is below ROOT_SHARE rtol, :func:`next_round` used to move the
+    pair up a level: a search on a level whose simulations cost ~4x the fine level's. Tightened
+    roots are far cheaper, but a tightened root moves within its old tolerance and the
+    correction with it, so a small room could be used up by the move. Here the move is bounded
+    instead of hoped for: a root searched again at tolerance t' lies within t + t' of the old
+    one (each within its tolerance of the level's root). Roots moved by relative amounts a
+    (fine) and b (coarse) move the relative correction c = (H_L - H_{L-1}) / (3 R),
+    R = H_L + (H_L - H_{L-1}) / 3, by (a H_L - b H_{L-1}) / (3 R) less c times R's own move
+    (4 a H_L - b H_{L-1}) / (3 R): with H_L, H_{L-1} = R (1 - c), R (1 - 4 c), to first order
+    at most g (a + b) / 3 with g = 1 + 8 |c|. The a posteriori part moves by at most k times
+    that, k = :func:`skidmc.solver.plan.a_posteriori_error` of a unit correction (every form of
+    it is k |c| or a floor, so it grows at most k per unit of |c|). The tightened estimate is
+    then at most
+
+    * fine root only (t_f -> t_f'): pair + k g (t_f + t_f') / 3 + bias + (4 t_f' + t_c) / 3;
+    * both (t_c' = BOUNDED_COARSE_RATIO t_f'):
+      pair + k g (t_c + t_f + t_c' + t_f') / 3 + bias + (4 t_f' + t_c') / 3,
+
+    and t_f' is the largest that keeps that bound at BOUNDED_AIM rtol.
+
+    Returns
+    -------
+    float
+        t_f' > 0: tighten the fine root alone to it; -t_f' < 0: tighten both roots, the coarse
+        one to BOUNDED_COARSE_RATIO t_f'; 0: neither reaches a t_f' of at least
+        BOUNDED_MIN_ROOT rtol below the old one (the pair moves up a level instead).
+    """
+    budget = BOUNDED_AIM * rtol - pair - melt_bias
+    slope = (a_posteriori_error(1.0, coarse_level, melt_spread, exact, signs)
+             * (1.0 + 8.0 * abs(correction)))
+    floor = BOUNDED_MIN_ROOT * rtol
+    fine = (budget - slope * fine_tol / 3.0 - coarse_tol / 3.0) * 3.0 / (4.0 + slope)
+    if floor <= fine < fine_tol:
+        return fine
+    ratio = BOUNDED_COARSE_RATIO
+    both = ((budget - slope * (coarse_tol + fine_tol) / 3.0)
+            * 3.0 / ((1.0 + ratio) * slope + 4.0 + ratio))
+    if floor <= both < fine_tol and ratio * both < coarse_tol:
+        return -both
+    return 0.0
+
+
+@njit(cache=True)
 def next_round(rtol, estimate, pair, melt_bias, correction, height, coarse_level, coarse_tol,
                fine_tol, melt_width, narrowed, melt_spread, exact, signs):
     """What the default search does next with a pair whose estimate is ``estimate`` [1].
@@ -170,6 +233,9 @@ def next_round(rtol, estimate, pair, melt_bias, correction, height, coarse_level
       it);
     * the width's bias exceeds twice its share (MELT_SHARE rtol) and the width can narrow:
       scale the width to bring the bias to its share (the bias is first order in w);
+    * the roots can be tightened to tolerances that bring the estimate within rtol however far
+      they move (:func:`bounded_tightening`): tighten them (a search at the fine level instead
+      of one at a level ~4x dearer);
     * otherwise move the pair up a level, up to MAX_ADAPTIVE_LEVEL (also where only a finer
       level's floor lets the width narrow further), unless the width's bias alone leaves no
       room and cannot narrow further. The new fine root's tolerance assumes the correction
@@ -191,6 +257,12 @@ def next_round(rtol, estimate, pair, melt_bias, correction, height, coarse_level
         width = max(floor, melt_width * MELT_SHARE * rtol / melt_bias)
         x_tol = pair_root_tolerance(rtol, fine_level, width, melt_spread, exact, signs)
         return NARROW, x_tol, 0.5 * x_tol, width
+    tight = bounded_tightening(rtol, pair, melt_bias, correction, coarse_level, coarse_tol,
+                               fine_tol, melt_spread, exact, signs)
+    if tight > 0.0:
+        return TIGHTEN_FINE, coarse_tol, tight, 0.0
+    if tight < 0.0:
+        return TIGHTEN_BOTH, -BOUNDED_COARSE_RATIO * tight, -tight, 0.0
     if fine_level + 1.0 <= MAX_ADAPTIVE_LEVEL and (
             melt_bias + ROOT_SHARE * rtol < rtol
             or (narrowed < MAX_NARROWINGS
