@@ -35,6 +35,7 @@ from skidmc.physics import mechanics
 from skidmc.scene import make_scene
 from skidmc.solver import critical_height, simulate
 from skidmc.solver.model import build_model
+from skidmc.solver.results import RTOL_SLACK, RTOL_UNMET
 
 RTOL = 1e-2
 H_MIN = 0.01     # [m] 1 cm
@@ -95,8 +96,18 @@ def solve(scene):
         assert h == {"above": H_MAX, "below": H_MIN}[res.censored]
     assert math.isfinite(res.error_estimate) and 0.0 < res.error_estimate < 0.1
     assert res.evaluations <= MAX_EVALUATIONS
-    assert set(res.flags) <= SCENE_FLAGS | HEIGHT_FLAGS, res.flags
+    _check_unmet(res)
+    assert set(res.flags) - {RTOL_UNMET} <= SCENE_FLAGS | HEIGHT_FLAGS, res.flags
     return res
+
+
+def _check_unmet(res):
+    """rtol_unmet (issue 44) is set exactly where an uncensored result's estimate stayed above
+    rtol. The slow matrix finds such results at rtol 1e-2: self-heating scenes (E/R 15,000-
+    21,700 K, T0 = 404 K) whose measured melting-width bias alone is 1.5-1.9e-2, estimates
+    2.2-2.5e-2 after two narrowings and a refinement (the flag was missing from this check)."""
+    unmet = res.censored is None and res.error_estimate > RTOL * (1.0 + RTOL_SLACK)
+    assert (RTOL_UNMET in res.flags) == unmet, (res.flags, res.error_estimate)
 
 
 def all_flags(scene, res):
@@ -109,6 +120,8 @@ def all_flags(scene, res):
     model = build_model(scene, level=res.level)
     flags = set(res.flags)
     assert set(model.height_flags(res.critical_height)) <= flags
+    _check_unmet(res)
+    flags.discard(RTOL_UNMET)
     assert flags <= SCENE_FLAGS | HEIGHT_FLAGS
     return flags
 
