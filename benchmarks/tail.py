@@ -21,13 +21,19 @@ Writes ``results/benchmarks/tail.md`` and ``tail.csv`` (one row per scene and rt
 
     python benchmarks/tail.py                 # ~270 scenes, 3 rtol, 2 repeats: a few minutes
     python benchmarks/tail.py --n 20 --repeat 1
+    git archive <commit> src | tar -x -C /tmp/base-<commit>
+    python benchmarks/tail.py --base /tmp/base-<commit>/src --pairs 4   # and side by side
+
+Side by side, each tree runs in one warm process and the scenes are timed interleaved (scene i
+in the base tree, then in this one, round after round), so that another tenant's burst on the
+shared machine falls on both; the in-process table is measured first and alone, and carries
+such bursts (compare within it only).
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
-import json
 import math
 import os
 import platform
@@ -162,48 +168,68 @@ def regime(scene):
     return exit_regime(scene)
 
 
-def times_only(scenes, repeat, rtol):
-    """Per-height times [s] of ``scenes`` at ``rtol`` (the smaller of ``repeat`` calls)."""
+def _serve(args):
+    """Child of :func:`side_by_side`: time the scene whose index each stdin line names (the
+    smaller of ``--repeat`` calls) and answer with the seconds, one line each."""
     import skidmc
 
-    skidmc.critical_height(scenes[0][2], rtol=rtol)
-    out = []
-    for _, _, scene in scenes:
+    scenes = study_scenes.draw(args.n, args.seed)
+    skidmc.critical_height(scenes[0][2], rtol=args.serve)   # kernels loaded first
+    print("ready", flush=True)
+    for line in sys.stdin:
+        scene = scenes[int(line)][2]
         best = math.inf
-        for _ in range(repeat):
+        for _ in range(args.repeat):
             t0 = time.perf_counter()
             try:
-                skidmc.critical_height(scene, rtol=rtol)
+                skidmc.critical_height(scene, rtol=args.serve)
             except Exception:  # noqa: BLE001, S110 - timed as it is
                 pass
             best = min(best, time.perf_counter() - t0)
-        out.append(best)
-    return out
+        print(repr(best), flush=True)
+    return 0
 
 
-def _tree_times(args, rtol, src):
-    """times_only in a fresh process on the source tree ``src``."""
+def _server(args, rtol, src):
+    """A :func:`_serve` child on the source tree ``src``, its kernels loaded."""
     # Each tree its own numba cache (skidmc._numba_cache keys it by the tree's source): the
     # NUMBA_CACHE_DIR this process set would make the trees overwrite each other's kernels.
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env["PYTHONPATH"] = str(src)
-    got = subprocess.run([sys.executable, __file__, "--child", repr(rtol), "--n", str(args.n),
-                          "--seed", str(args.seed), "--repeat", str(args.repeat)], env=env,
-                         capture_output=True, text=True, check=True)
-    return json.loads(got.stdout.strip().splitlines()[-1])
+    proc = subprocess.Popen([sys.executable, __file__, "--serve", repr(rtol), "--n",
+                             str(args.n), "--seed", str(args.seed), "--repeat",
+                             str(args.repeat)], env=env, stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    if proc.stdout.readline().strip() != "ready":
+        raise RuntimeError(f"the timing child on {src} did not start")
+    return proc
 
 
 def side_by_side(args, rtol):
-    """Per-scene times [s] of the tree ``args.base`` and of this one, each in fresh processes
-    taking turns (base, this, base, this, ... ``args.pairs`` times): the smaller per scene."""
+    """Per-scene times [s] of the tree ``args.base`` and of this one, interleaved scene by
+    scene: one warm process per tree, each scene timed ``args.pairs`` times in each, the two
+    trees taking turns (base first in even rounds, this one in odd ones), so that a burst of
+    another tenant's load falls on both; the smaller time per scene and tree."""
     import skidmc
 
     here = Path(skidmc.__file__).resolve().parents[1]
-    runs = {"base": [], "this": []}
-    for _ in range(args.pairs):
-        runs["base"].append(_tree_times(args, rtol, args.base))
-        runs["this"].append(_tree_times(args, rtol, here))
-    return {name: np.min(np.array(r), axis=0).tolist() for name, r in runs.items()}
+    servers = {"base": _server(args, rtol, args.base), "this": _server(args, rtol, here)}
+    n = len(study_scenes.draw(args.n, args.seed))
+    best = {name: [math.inf] * n for name in servers}
+    try:
+        for k in range(args.pairs):
+            order = ("base", "this") if k % 2 == 0 else ("this", "base")
+            for i in range(n):
+                for name in order:
+                    proc = servers[name]
+                    proc.stdin.write(f"{i}\n")
+                    proc.stdin.flush()
+                    best[name][i] = min(best[name][i], float(proc.stdout.readline()))
+    finally:
+        for proc in servers.values():
+            proc.stdin.close()
+            proc.wait()
+    return best
 
 
 def measure(scenes, repeat, args=None):
@@ -288,16 +314,25 @@ def markdown(args, scenes, rows, base, load_before, load_after):
                      f"{mx:.2f} | {mean / med:.2f} | {mx / med:.1f} | "
                      f"{np.mean(ev):.1f}, {max(ev)} |")
     if base:
-        lines += ["", f"Side by side with the tree at `{args.base}`: both timed in fresh "
-                  f"processes taking turns ({args.pairs} pairs per rtol, the same scenes and "
-                  "repeats; per scene the smaller time of its runs):", "",
-                  "| rtol | tree | mean | median | p90 | max |", "|---|---|---|---|---|---|"]
+        lines += ["", f"Side by side with the tree at `{args.base}`: one warm process per "
+                  f"tree, scene by scene, the trees taking turns ({args.pairs} rounds per "
+                  "rtol, the same scenes and repeats; per scene the smaller time of its "
+                  "rounds), so that another tenant's burst falls on both. Ratio: this tree's "
+                  "time over the base's per scene (median, and over the summed time):", "",
+                  "| rtol | tree | mean | median | p90 | max | mean / median | max / median "
+                  "| ratio to base (per-scene median; total) |",
+                  "|---|---|---|---|---|---|---|---|---|"]
         for rtol in RTOLS:
             for name in ("base", "this"):
                 ms = [1e3 * t for t in base[rtol][name]]
                 mean, med, p90, mx = _stats(ms)
+                ratio = ""
+                if name == "this":
+                    per = np.array(base[rtol]["this"]) / np.array(base[rtol]["base"])
+                    ratio = (f"{np.median(per):.2f}; "
+                             f"{sum(base[rtol]['this']) / sum(base[rtol]['base']):.2f}")
                 lines.append(f"| {rtol:g} | {name} | {mean:.2f} | {med:.2f} | {p90:.2f} | "
-                             f"{mx:.2f} |")
+                             f"{mx:.2f} | {mean / med:.2f} | {mx / med:.1f} | {ratio} |")
     lines += ["", "## By group and regime at rtol 1e-3 [ms]", "",
               "| group | regime | scenes | mean | median | p90 | max | share of the total time |",
               "|---|---|---|---|---|---|---|---|"]
@@ -360,22 +395,40 @@ def markdown(args, scenes, rows, base, load_before, load_after):
     return "\n".join(lines) + "\n"
 
 
-def figure(rows, path):
+def figure(rows, path, base=None, base_name=None):
+    """Per-height times sorted, per rtol: the side-by-side times where a base tree was timed
+    (base dashed, this tree solid), else the in-process ones."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    fig, ax = plt.subplots(figsize=(6.8, 3.9))
+    colors = dict(zip(RTOLS, ("tab:blue", "tab:orange", "tab:green"), strict=True))
     for rtol in RTOLS:
-        ms = np.sort([1e3 * r["seconds"] for r in rows if r["rtol"] == rtol])
-        ax.plot(np.arange(1, len(ms) + 1) / len(ms), ms, label=f"rtol {rtol:g}")
+        if base:
+            for name, style in (("base", "--"), ("this", "-")):
+                ms = np.sort(1e3 * np.array(base[rtol][name]))
+                label = f"rtol {rtol:g}, " + (f"base ({base_name})" if name == "base"
+                                              else "this tree")
+                ax.plot(np.arange(1, len(ms) + 1) / len(ms), ms, style, color=colors[rtol],
+                        label=label)
+        else:
+            ms = np.sort([1e3 * r["seconds"] for r in rows if r["rtol"] == rtol])
+            ax.plot(np.arange(1, len(ms) + 1) / len(ms), ms, color=colors[rtol],
+                    label=f"rtol {rtol:g}")
     ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(FuncFormatter(
+        lambda v, _: f"{v:g}" if f"{v:g}"[0] in "25" else ""))
     ax.set_xlabel("fraction of scenes (sorted by time)")
     ax.set_ylabel("time per critical height [ms]")
-    ax.set_title("Study scenes: per-height time, one process")
+    ax.set_title("Study scenes: per-height time"
+                 + (", side by side (warm processes, scenes interleaved)" if base
+                    else ", one process"), fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
+    ax.legend(fontsize=7.5, ncol=1 if not base else 2, loc="upper left")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -388,13 +441,13 @@ def main(argv=None):
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--out", default=str(ROOT / "results" / "benchmarks"))
     parser.add_argument("--base", help="the src folder of another tree, timed side by side")
-    parser.add_argument("--pairs", type=int, default=3, help="side-by-side pairs per rtol")
-    parser.add_argument("--child", type=float, help=argparse.SUPPRESS)
+    parser.add_argument("--pairs", type=int, default=3,
+                        help="side-by-side rounds per rtol (each scene timed once per tree per "
+                             "round)")
+    parser.add_argument("--serve", type=float, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if args.child:
-        print(json.dumps(times_only(study_scenes.draw(args.n, args.seed), args.repeat,
-                                    args.child)))
-        return 0
+    if args.serve:
+        return _serve(args)
     load_before = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     scenes = study_scenes.draw(args.n, args.seed)
     rows, base = measure(scenes, args.repeat, args)
@@ -408,7 +461,7 @@ def main(argv=None):
         writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
         writer.writerows(rows)
-    figure(rows, out / "tail.png")
+    figure(rows, out / "tail.png", base, Path(args.base).parent.name if args.base else None)
     print((out / "tail.md").read_text())
     return 0
 
