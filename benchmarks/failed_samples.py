@@ -6,7 +6,8 @@ them, a melting step with ``he.heat_of_fusion = 1e10 J/kg``, used to run one sim
 global cap of 200,000 step attempts (``solver.simulate.MAX_STEPS``), each ~50x a normal attempt's
 cost through failing Newton iterations. ``solver.simulate.stall_cap`` now stops a run at
 ``STALL_FACTOR`` x the most attempts of the earlier runs of its search at its level (at least
-``STALL_FLOOR``), and at ``STALL_ATTEMPTS_LEVEL0 x 2^level`` attempts in any case. This
+``STALL_FLOOR`` and ``STALL_FLOOR_LEVEL0 x 2^level``), and at ``STALL_ATTEMPTS_LEVEL0 x
+2^level`` attempts in any case. This
 script times each failing scene side by side in one process, alternating the shipped caps
 ("after") with the old one (``stall_cap`` patched to ``MAX_STEPS``, "before"), and writes the
 median seconds per failed sample. The solvable scenes' results
@@ -101,7 +102,8 @@ def main() -> None:
              f"{args.calls} calls per case, the caps alternated call by call in one process. "
              "Before: every run capped at 200,000 step attempts; after: `stall_cap`, "
              f"{sim.STALL_FACTOR} x the most attempts of the earlier runs of the search at "
-             f"its level (at least {sim.STALL_FLOOR:,}) and {sim.STALL_ATTEMPTS_LEVEL0:,} x "
+             f"its level (at least {sim.STALL_FLOOR:,} and {sim.STALL_FLOOR_LEVEL0:,} x "
+             f"2^level) and {sim.STALL_ATTEMPTS_LEVEL0:,} x "
              "2^level (at most 200,000).", "",
              "| paper-quartz with | before [s] | after [s] | ratio | reason (after) |",
              "|---|---|---|---|---|"]
