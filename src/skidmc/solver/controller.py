@@ -67,9 +67,11 @@ MAX_NARROWINGS = 2
 #: t <= rtol at most 1e-2 of rtol at rtol 1e-2, 1e-3 at rtol 1e-3).
 BOUNDED_AIM = 0.99
 #: Smallest fine root tolerance :func:`bounded_tightening` asks for [fraction of rtol]: below it
-#: the pair moves up a level. A jumping margin pays one simulation per halving of its bracket:
-#: from the first fine tolerance (~0.1-0.2 rtol) to 0.02 rtol is ~3 halvings at the fine
-#: level, against the 2-6 simulations at a level 4x dearer a refinement costs.
+#: the pair moves up a level. A smooth margin's root finder converges faster than linearly,
+#: so a tighter root costs one or two more simulations; a jumping margin pays one simulation
+#: per halving of its bracket: from its first fine tolerance (~0.2 rtol) to 0.005 rtol is ~5
+#: halvings at the fine level, against the 5-6 simulations at a level ~4x dearer that such a
+#: scene's refinement took (benchmarks/tail.py).
 BOUNDED_MIN_ROOT = 0.005
 #: Coarse to fine root tolerance where :func:`bounded_tightening` tightens both (the ratio of
 #: the first pair's tolerances, :func:`first_root_tolerances`: the fine root weighs 4x).

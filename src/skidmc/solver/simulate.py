@@ -165,10 +165,7 @@ def step_cap(model) -> int:
     :data:`STALL_ATTEMPTS_LEVEL0` x 2^level (the level read from the model's step tolerance,
     which falls 8x per level: :func:`skidmc.solver.model.level_resolution`), at most
     :data:`MAX_STEPS`."""
-    level = _level(model)
-    if level is None:
-        return MAX_STEPS
-    return int(min(MAX_STEPS, STALL_ATTEMPTS_LEVEL0 * 2.0 ** level))
+    return _step_cap_at(_level(model))
 
 
 def stall_cap(model, prefix=None) -> int:
@@ -176,9 +173,12 @@ def stall_cap(model, prefix=None) -> int:
     :func:`step_cap`, and, where the runs of one search share `prefix` (a
     :class:`LinearPrefix`), :data:`STALL_FACTOR` x the most attempts of its earlier runs (at
     least :data:`STALL_FLOOR` and :data:`STALL_FLOOR_LEVEL0` x 2^level)."""
-    cap = step_cap(model)
+    level = _level(model)
+    cap = _step_cap_at(level)
     if prefix is not None and prefix.model is model and prefix.most_attempts > 0:
-        cap = min(cap, max(stall_floor(model), STALL_FACTOR * prefix.most_attempts))
+        floor = STALL_FLOOR if level is None else int(
+            max(STALL_FLOOR, STALL_FLOOR_LEVEL0 * 2.0 ** level))
+        cap = min(cap, max(floor, STALL_FACTOR * prefix.most_attempts))
     return cap
 
 
@@ -192,13 +192,11 @@ def _level(model):
     return max(0.0, math.log2(BASE_RESOLUTION.tol_temperature / tol) / 3.0)
 
 
-def stall_floor(model) -> int:
-    """Fewest attempts [1] at which a run of `model` may count as stalled after its search's
-    earlier runs: :data:`STALL_FLOOR`, and :data:`STALL_FLOOR_LEVEL0` x 2^level."""
-    level = _level(model)
+def _step_cap_at(level):
+    """:func:`step_cap` at ``level`` (None: unknown, the global cap)."""
     if level is None:
-        return STALL_FLOOR
-    return int(max(STALL_FLOOR, STALL_FLOOR_LEVEL0 * 2.0 ** level))
+        return MAX_STEPS
+    return int(min(MAX_STEPS, STALL_ATTEMPTS_LEVEL0 * 2.0 ** level))
 
 
 def simulate(model, height, *, record=False, max_steps=None, flux_override=None,
