@@ -205,16 +205,16 @@ def _server(args, rtol, src):
     return proc
 
 
-def side_by_side(args, rtol):
+def side_by_side(args, rtol, n):
     """Per-scene times [s] of the tree ``args.base`` and of this one, interleaved scene by
     scene: one warm process per tree, each scene timed ``args.pairs`` times in each, the two
     trees taking turns (base first in even rounds, this one in odd ones), so that a burst of
-    another tenant's load falls on both; the smaller time per scene and tree."""
+    another tenant's load falls on both; the smaller time per scene and tree. ``n``: how many
+    scenes the children draw (the same draw as this process's)."""
     import skidmc
 
     here = Path(skidmc.__file__).resolve().parents[1]
     servers = {"base": _server(args, rtol, args.base), "this": _server(args, rtol, here)}
-    n = len(study_scenes.draw(args.n, args.seed))
     best = {name: [math.inf] * n for name in servers}
     try:
         for k in range(args.pairs):
@@ -239,7 +239,7 @@ def measure(scenes, repeat, args=None):
     base = {}
     for rtol in RTOLS:
         if args is not None and args.base:
-            base[rtol] = side_by_side(args, rtol)
+            base[rtol] = side_by_side(args, rtol, len(scenes))
         skidmc.critical_height(scenes[0][2], rtol=rtol)   # load what this rtol uses
         for label, group, scene in scenes:
             best, res, error = math.inf, None, ""
