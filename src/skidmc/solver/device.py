@@ -33,10 +33,10 @@ Where it differs from the CPU search, and why
   reaches below the top layer, and targets whose properties follow a temperature table
   ("temperature_target"; the thread's target has constant properties). The batch front end
   (:func:`skidmc.solver.cuda.cuda_critical_heights`) does this; no sample is lost.
-* Stalled runs: the same cap as the CPU search (:func:`run_cap`, the rule of
-  :func:`skidmc.solver.simulate.stall_cap`: 10x the most step attempts of the search's earlier
-  runs, at least 4,000, 12,500 x 2^level in any case), so a run that stalls hands its scene to
-  the CPU search after a few thousand attempts instead of 200,000.
+* Stalled runs: the CPU search's cap, the same compiled function
+  (:func:`skidmc.solver.simulate.run_cap`: 10x the most step attempts of the search's earlier
+  runs, at least 4,000 and 2,000 x 2^level, 12,500 x 2^level in any case), so a run that stalls
+  hands its scene to the CPU search after a few thousand attempts instead of 200,000.
 """
 
 from __future__ import annotations
@@ -84,13 +84,7 @@ from skidmc.solver.model import (
 )
 from skidmc.solver.plan import modelled_error
 from skidmc.solver.roots import FAST_GUESS_ERROR
-from skidmc.solver.simulate import (
-    MAX_STEPS,
-    STALL_ATTEMPTS_LEVEL0,
-    STALL_FACTOR,
-    STALL_FLOOR,
-    STALL_FLOOR_LEVEL0,
-)
+from skidmc.solver.simulate import run_cap
 
 __all__ = [
     "DEVICE_MAX_LEVEL",
@@ -144,8 +138,6 @@ OUT_SIZE = 10
  _S_LATENT, _S_RUNAWAY, _S_SPREAD, _S_MOST) = range(11)
 _N_SCALARS = 11
 
-#: The base level's step tolerance [K] (a float for the compiled code: run_cap).
-_BASE_TOL_TEMPERATURE = float(BASE_RESOLUTION.tol_temperature)
 
 
 @njit(cache=True)
@@ -157,25 +149,6 @@ def _build_level(row, sc, level, work):
                         n_cells, first_fraction, DEPTH_DIFFUSION_LENGTHS, work[_ROW_WIDTH],
                         work[_ROW_RHO_C], work[_ROW_FACE])
     return n_cells, share, tol_temperature
-
-
-@njit(cache=True)
-def run_cap(tol_temperature, most):
-    """Most step attempts [1] of a run at step tolerance ``tol_temperature`` [K] before it
-    counts as stalled, after runs of the same search of at most ``most`` attempts (0: none yet).
-
-    The rule of the CPU search (:func:`skidmc.solver.simulate.stall_cap`, the same constants):
-    :data:`~skidmc.solver.simulate.STALL_ATTEMPTS_LEVEL0` x 2^level, at most ``MAX_STEPS``,
-    and :data:`~skidmc.solver.simulate.STALL_FACTOR` x ``most`` (at least ``STALL_FLOOR`` and
-    ``STALL_FLOOR_LEVEL0`` x 2^level) once the search has run. A stalled run makes the search
-    go to the CPU search, which fails the sample with its reason as fast.
-    """
-    level = max(0.0, math.log2(_BASE_TOL_TEMPERATURE / tol_temperature) / 3.0)
-    cap = int(min(MAX_STEPS, STALL_ATTEMPTS_LEVEL0 * 2.0 ** level))
-    if most > 0:
-        floor = int(max(STALL_FLOOR, STALL_FLOOR_LEVEL0 * 2.0 ** level))
-        cap = min(cap, max(floor, STALL_FACTOR * int(most)))
-    return cap
 
 
 @njit(cache=True)

@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from skidmc.physics.records import KERNEL_OUTPUT, kernel_input
 from skidmc.physics.thermal import (
@@ -18,10 +19,11 @@ from skidmc.physics.thermal import (
     prefix_size,
     simulate_kernel,
 )
+from skidmc.solver.model import BASE_RESOLUTION
 
 __all__ = ["MAX_STEPS", "STALL_ATTEMPTS_LEVEL0", "STALL_FACTOR", "STALL_FLOOR",
            "STALL_FLOOR_LEVEL0", "LinearPrefix", "Simulation", "SolverError", "kernel_arguments",
-           "simulate", "stall_cap", "step_cap"]
+           "run_cap", "simulate", "stall_cap", "step_cap"]
 
 #: Most step attempts (accepted + rejected) of any run [1]: the cap of a run at level 4 and
 #: above, and of a caller that names no model's level.
@@ -59,6 +61,9 @@ STALL_ATTEMPTS_LEVEL0 = 12_500
 STALL_FACTOR = 10
 STALL_FLOOR = 4_000
 STALL_FLOOR_LEVEL0 = 2_000
+
+#: The base level's step tolerance [K] (a float for the compiled :func:`run_cap`).
+_BASE_TOL_TEMPERATURE = float(BASE_RESOLUTION.tol_temperature)
 
 
 class SolverError(RuntimeError):
@@ -160,43 +165,52 @@ def kernel_arguments(model, height, *, max_steps=MAX_STEPS, flux_override=None,
             np.zeros(0) if prefix is None else prefix, model.target_table]
 
 
-def step_cap(model) -> int:
-    """Most step attempts [1] of a run of `model` before it counts as stalled:
-    :data:`STALL_ATTEMPTS_LEVEL0` x 2^level (the level read from the model's step tolerance,
-    which falls 8x per level: :func:`skidmc.solver.model.level_resolution`), at most
-    :data:`MAX_STEPS`."""
-    return _step_cap_at(_level(model))
+@njit(cache=True)
+def run_cap(tol_temperature, most):
+    """Most step attempts [1] of a run at step tolerance ``tol_temperature`` [K] before it
+    counts as stalled, after runs of the same search of at most ``most`` attempts (0: none yet).
 
-
-def stall_cap(model, prefix=None) -> int:
-    """Most step attempts [1] of a run of `model` before it counts as stalled: the level's
-    :func:`step_cap`, and, where the runs of one search share `prefix` (a
-    :class:`LinearPrefix`), :data:`STALL_FACTOR` x the most attempts of its earlier runs (at
-    least :data:`STALL_FLOOR` and :data:`STALL_FLOOR_LEVEL0` x 2^level)."""
-    level = _level(model)
-    cap = _step_cap_at(level)
-    if prefix is not None and prefix.model is model and prefix.most_attempts > 0:
-        floor = STALL_FLOOR if level is None else int(
-            max(STALL_FLOOR, STALL_FLOOR_LEVEL0 * 2.0 ** level))
-        cap = min(cap, max(floor, STALL_FACTOR * prefix.most_attempts))
+    :data:`STALL_ATTEMPTS_LEVEL0` x 2^level (the level read from the step tolerance, which falls
+    8x per level: :func:`skidmc.solver.model.level_resolution`), at most :data:`MAX_STEPS`, and
+    :data:`STALL_FACTOR` x ``most`` (at least :data:`STALL_FLOOR` and
+    :data:`STALL_FLOOR_LEVEL0` x 2^level) once the search has run. Compiled, so that the CPU
+    search (:func:`stall_cap`) and the device search (:mod:`skidmc.solver.device`, CPU threads
+    and GPU) apply one text of the rule; a stalled device run sends its scene to the CPU
+    search, which fails the sample with its reason as fast.
+    """
+    level = max(0.0, math.log2(_BASE_TOL_TEMPERATURE / tol_temperature) / 3.0)
+    cap = int(min(MAX_STEPS, STALL_ATTEMPTS_LEVEL0 * 2.0 ** level))
+    if most > 0:
+        floor = int(max(STALL_FLOOR, STALL_FLOOR_LEVEL0 * 2.0 ** level))
+        cap = min(cap, max(floor, STALL_FACTOR * int(most)))
     return cap
 
 
-def _level(model):
-    """The model's level, read from its step tolerance (8x smaller per level); None if unknown."""
-    from skidmc.solver.model import BASE_RESOLUTION
-
+def _tolerance(model):
+    """The model's step tolerance [K] (its level's); None where the model has none."""
     tol = getattr(getattr(model, "resolution", None), "tol_temperature", None)
-    if not isinstance(tol, float) or not tol > 0.0:
-        return None
-    return max(0.0, math.log2(BASE_RESOLUTION.tol_temperature / tol) / 3.0)
+    return tol if isinstance(tol, float) and tol > 0.0 else None
 
 
-def _step_cap_at(level):
-    """:func:`step_cap` at ``level`` (None: unknown, the global cap)."""
-    if level is None:
-        return MAX_STEPS
-    return int(min(MAX_STEPS, STALL_ATTEMPTS_LEVEL0 * 2.0 ** level))
+def step_cap(model) -> int:
+    """Most step attempts [1] of a run of `model` before it counts as stalled, before its
+    search has run: :func:`run_cap` with no earlier runs; :data:`MAX_STEPS` where the model
+    has no step tolerance."""
+    tol = _tolerance(model)
+    return MAX_STEPS if tol is None else run_cap(tol, 0.0)
+
+
+def stall_cap(model, prefix=None) -> int:
+    """Most step attempts [1] of a run of `model` before it counts as stalled: :func:`run_cap`,
+    with the most attempts of its search's earlier runs where those share `prefix` (a
+    :class:`LinearPrefix`). A model without a step tolerance: :data:`MAX_STEPS`, and after
+    earlier runs :data:`STALL_FACTOR` x their most (at least :data:`STALL_FLOOR`)."""
+    most = (prefix.most_attempts
+            if prefix is not None and prefix.model is model and prefix.most_attempts > 0 else 0)
+    tol = _tolerance(model)
+    if tol is None:
+        return MAX_STEPS if most == 0 else min(MAX_STEPS, max(STALL_FLOOR, STALL_FACTOR * most))
+    return run_cap(tol, float(most))
 
 
 def simulate(model, height, *, record=False, max_steps=None, flux_override=None,
