@@ -30,7 +30,7 @@ import numpy as np
 from skidmc.errors import SceneError
 from skidmc.physics.fast import N_TIMES
 from skidmc.physics.records import KERNEL_RUN
-from skidmc.solver.device import MAX_CELLS, WORK_ROWS, critical_height_core
+from skidmc.solver.device import HISTORY_SHAPE, MAX_CELLS, WORK_ROWS, critical_height_core
 
 __all__ = [
     "BACKENDS",
@@ -44,8 +44,10 @@ __all__ = [
 #: Backends of :func:`critical_heights` (and of ``[solver] backend`` in a study).
 BACKENDS = ("cpu", "cuda")
 
-#: Threads per CUDA block. Each thread holds ~30 KB of local memory (its mesh and integrator
-#: state, :data:`skidmc.solver.device.MAX_CELLS`), so blocks are kept small.
+#: Threads per CUDA block. Each thread holds ~77 KB of local memory (its HE mesh and integrator
+#: state, :data:`skidmc.solver.device.MAX_CELLS`, and the exact target's flux history,
+#: :data:`skidmc.solver.device.HISTORY_SHAPE`; ptxas for sm_90, docs/gpu.md), so blocks are
+#: kept small.
 THREADS_PER_BLOCK = 64
 
 #: Scenes per kernel launch: bounds the device memory of one launch and lets a long batch
@@ -91,31 +93,32 @@ def cuda_status() -> tuple[bool, str]:
 # never imports it); the array shapes are compile-time constants of the kernel.
 cuda = None
 _WORK_SHAPE = (WORK_ROWS, MAX_CELLS)
+_HISTORY_SHAPE = HISTORY_SHAPE
 _FAST_SHAPE = (3, N_TIMES)
 _KERNEL = None
 
 
-def _thread(rows, rtol, h_min, h_max, level, melt_width, melt_spread, x_tol, melting,
-            runaway_fraction, table, gl_x, gl_w, out):
+def _thread(rows, rtol, h_min, h_max, melt_spread, melting, runaway_fraction, table, gl_x, gl_w,
+            out):
     """One thread: the device search of scene ``rows[i]`` into ``out[i]`` (compiled by
     :func:`_kernel`)."""
     i = cuda.grid(1)
     if i < rows.shape[0]:
         # The thread's whole state: mesh, integrator arrays, search brackets (local memory).
         work = cuda.local.array(_WORK_SHAPE, np.float64)
+        history = cuda.local.array(_HISTORY_SHAPE, np.float64)
         fast_work = cuda.local.array(_FAST_SHAPE, np.float64)
         info = cuda.local.array(1, KERNEL_RUN)   # the current run's input and outcome
         coarse = cuda.local.array(8, np.float64)
         fine = cuda.local.array(8, np.float64)
-        _core(rows[i], rtol, h_min, h_max, level, melt_width, melt_spread, x_tol, melting,
-              runaway_fraction, table, gl_x, gl_w, work, fast_work, info, coarse, fine, out[i])
+        _core(rows[i], rtol, h_min, h_max, melt_spread, melting, runaway_fraction, table, gl_x,
+              gl_w, work, history, fast_work, info, coarse, fine, out[i])
 
 
 #: The types of :func:`_thread`'s arguments, in order: what ``scripts/compile_cuda_ptx.py``
 #: compiles ahead of a GPU (tests/test_device.py checks that it names every argument).
-THREAD_SIGNATURE = ("void(float64[:, ::1], float64, float64, float64, float64, float64, float64, "
-                    "float64, boolean, float64, float64[::1], float64[::1], float64[::1], "
-                    "float64[:, ::1])")
+THREAD_SIGNATURE = ("void(float64[:, ::1], float64, float64, float64, float64, boolean, float64, "
+                    "float64[::1], float64[::1], float64[::1], float64[:, ::1])")
 
 
 # What a thread calls: the compiled search itself on a GPU (numba compiles the njit function
@@ -144,17 +147,6 @@ def _kernel():
             _core = _simulated_core
         _KERNEL = numba_cuda.jit(_thread)
     return _KERNEL
-
-
-def _plan(rtol):
-    """(level, melting width [K], melting spread [1], root tolerance [1]) of the first
-    Richardson pair for rtol: the CPU default search's."""
-    from skidmc.physics.thermal import MELT_SPREAD
-    from skidmc.solver.plan import first_pair_level, melt_width_for_rtol, pair_root_tolerance
-
-    level = first_pair_level(rtol)
-    width = melt_width_for_rtol(rtol, level)
-    return level, width, MELT_SPREAD, pair_root_tolerance(rtol, level, width, MELT_SPREAD)
 
 
 def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", melting=True,
@@ -188,7 +180,7 @@ def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", 
         Wall time of the device part [s] (kernel launches and transfers, or the CPU threads).
     """
     from skidmc.physics.fast import _GL_W01, _GL_X01, MELT_TABLE
-    from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION
+    from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION, MELT_SPREAD
     from skidmc.solver.device import OUT_SIZE, critical_heights_cpu
 
     if backend not in BACKENDS:
@@ -201,9 +193,9 @@ def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", 
     if rows.ndim != 2 or rows.shape[1] != 19:
         raise ValueError(f"rows must have shape (n, 19), got {rows.shape}")
     runaway = DEFAULT_RUNAWAY_FRACTION if runaway_fraction is None else float(runaway_fraction)
-    level, width, spread, x_tol = _plan(float(rtol))
-    args = (float(rtol), float(h_min), float(h_max), float(level), float(width), float(spread),
-            float(x_tol), bool(melting), runaway)
+    # Each scene's plan (first pair, melting width, root tolerances) is made on the device from
+    # rtol, as the CPU search makes it; the melting spread is the CPU search's default.
+    args = (float(rtol), float(h_min), float(h_max), float(MELT_SPREAD), bool(melting), runaway)
     n = rows.shape[0]
     out = np.zeros((n, OUT_SIZE))
     start = time.perf_counter()

@@ -26,6 +26,7 @@ __all__ = [
     "EXACT_SIGN_FLOOR",
     "EXACT_SIGN_RESIDUAL_RATIO",
     "EXACT_STEADY_FINE_OVERSHOOT",
+    "exact_first_pair_level",
     "JUMP_COARSE_SHARE",
     "LIKELY_CORRECTION_FRACTION",
     "MAX_ADAPTIVE_LEVEL",
@@ -269,6 +270,22 @@ def plan_for_rtol(rtol):
         return extrapolated, True
     return plain, False
 
+@njit(cache=True)
+def exact_first_pair_level(rtol, signs):
+    """:func:`first_pair_level` of the exact target [1] (``signs``: the root is located by
+    signs), compiled: the default CPU search and the device search
+    (:mod:`skidmc.solver.device`) plan their first pair with this one text."""
+    level = RICHARDSON_MIN_LEVEL
+    while level < MAX_ADAPTIVE_LEVEL:
+        # The exact rule does not depend on the melting spread (1: the default's).
+        predicted = predicted_pair_error(level, melt_width_for_rtol(rtol, level), 1.0,
+                                         True, signs)
+        if predicted <= (1.0 - ROOT_SHARE) * rtol:
+            break
+        level += 0.5
+    return level
+
+
 def first_pair_level(rtol, exact=False, signs=False):
     """Fine level of the first Richardson pair ``(L - 1, L)`` the default search tries [1].
 
@@ -284,15 +301,7 @@ def first_pair_level(rtol, exact=False, signs=False):
     (steady) or 2.5 (signs).
     """
     if exact:
-        level = RICHARDSON_MIN_LEVEL
-        while level < MAX_ADAPTIVE_LEVEL:
-            # The exact rule does not depend on the melting spread (1: the default's).
-            predicted = predicted_pair_error(level, melt_width_for_rtol(rtol, level), 1.0,
-                                             True, signs)
-            if predicted <= (1.0 - ROOT_SHARE) * rtol:
-                break
-            level += 0.5
-        return level
+        return exact_first_pair_level(rtol, signs)
     level, extrapolate = plan_for_rtol(rtol)
     if not extrapolate:
         level = math.ceil(level - 1e-9)
