@@ -6,9 +6,10 @@ EXACT_SIGN_FLOOR 3^-(L-1)) with the ratio 2: the bound that holds for any order 
 worst ratio the calibration measured for this pair (`scripts/a_posteriori_calibration.py
 --target exact`, results/validation/a_posteriori_exact.md: pair (0.5, 1.5), sign-located, 57
 scenes x widths, median 0.57, 95th percentile 1.29, worst 1.99 at 1 K, against the Richardson
-value of levels 3 and 4 at the same width; `skidmc.solver.plan`). At rtol 1e-3 it is what makes the stops-sliding scenes of
-sobol-series1 refine to level 2.5 (the slowest heights of `benchmarks/tail.py`). This script
-measures, on the sign-located scenes drawn from the shipped studies
+value of levels 3 and 4 at the same width; `skidmc.solver.plan`). At rtol 1e-3 it is what
+makes the stops-sliding scenes of sobol-series1 refine to level 2.5 (the slowest heights of
+`benchmarks/tail.py`). This script measures, on the sign-located scenes drawn from the shipped
+studies
 (`benchmarks/study_scenes.py`, seed 45, constant targets), the residual of the pair
 (0.5, 1.5) (exact target, melting spread, width 1 K, roots at rtol 1e-5) against the default
 search at `--reference` rtol with the same width, over the pair's |c|.
