@@ -292,6 +292,28 @@ def test_cuda_backend_without_a_gpu_says_what_is_missing_and_cpu_never_imports_i
         assert "GPU" in proc.stdout or "CUDA" in proc.stdout
 
 
+def test_a_cuda_study_names_the_scenes_the_device_cannot_take(tmp_path, capsys):
+    # Every scene of the shipped studies has a layered or temperature-dependent target, which
+    # the device hands to the CPU search in the run's one process: the run says so by name
+    # before it starts (here it then stops, without a GPU, or runs under one).
+    from skidmc.cli import main
+    from skidmc.solver.cuda import cpu_only_reason
+
+    assert cpu_only_reason(get_preset("paper-quartz"), 1e-2) is None
+    assert cpu_only_reason(get_preset("paper-quartz").replace(target="fused-quartz"),
+                           1e-2) == "temperature_target"
+    assert cpu_only_reason(get_preset("paper-gold").replace(target="gold-stack-report"),
+                           1e-2) == "layered_target"
+    study = tmp_path / "s.toml"
+    study.write_text(TINY.replace('preset = "paper-alumina-smooth"',
+                                  'preset = "paper-alumina-smooth"\ntarget = "alumina-85"')
+                     .replace("[solver]", '[solver]\nbackend = "cuda"'))
+    main(["run", str(study), "--out", str(tmp_path / "o.h5"), "--n", "2", "--yes"])
+    err = capsys.readouterr().err
+    assert "1 of 2 scenes cannot run on the device: alumina (temperature_target)" in err, err
+    assert "quartz (" not in err
+
+
 def test_the_ptx_signature_names_every_argument_of_the_thread():
     # scripts/compile_cuda_ptx.py compiles _thread with THREAD_SIGNATURE; an argument added to
     # _thread and not to the signature broke that compile on a real GPU once (13 types for 14

@@ -378,6 +378,26 @@ def _confirm_run(size, args: argparse.Namespace) -> bool:
     return answer.strip().lower() in ("y", "yes")
 
 
+def _warn_device_scenes(study) -> None:
+    """With ``solver.backend = "cuda"``, name the study's scenes the device search cannot take
+    (:func:`skidmc.solver.cuda.cpu_only_reason`): the run solves them with the CPU search in its
+    one process, slower than ``backend = "cpu"`` on worker processes."""
+    solver = getattr(study, "solver", None)
+    if getattr(solver, "backend", "cpu") != "cuda" or not getattr(study, "scenes", None):
+        return
+    from skidmc.solver.cuda import cpu_only_reason
+
+    cpu_only = [(s.name, why) for s in study.scenes
+                if (why := cpu_only_reason(s.scene, float(solver.rtol))) is not None]
+    if cpu_only:
+        named = ", ".join(f"{name} ({why})" for name, why in cpu_only)
+        print(f"skidmc run: warning: solver.backend = 'cuda', but {len(cpu_only)} of "
+              f"{len(study.scenes)} scenes cannot run on the device: {named}. The device takes "
+              "constant, homogeneous targets only; these scenes are solved by the CPU search in "
+              "this one process, slower than backend = 'cpu' with --workers (docs/gpu.md)",
+              file=sys.stderr)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     """``skidmc run``: exit status 0 done (or up to date), 2 invalid study, option or result
     file, 130 interrupted. The kind of study is looked up (:mod:`skidmc.workflows`)."""
@@ -403,6 +423,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     try:
         kind, study = load(args.study)
         check_options(kind, options)
+        if not args.quiet:
+            _warn_device_scenes(study)
         if getattr(study, "design", None) is not None and hasattr(study, "with_n"):
             shown = study.with_n(args.n) if args.n is not None else study  # StudyError: bad n
             if not args.quiet and (shown.design.n_epistemic

@@ -37,6 +37,7 @@ __all__ = [
     "CudaUnavailableError",
     "THREADS_PER_BLOCK",
     "critical_heights",
+    "cpu_only_reason",
     "cuda_status",
     "solve_scenes",
 ]
@@ -229,6 +230,24 @@ def critical_heights(rows, rtol=1e-3, h_min=1e-3, h_max=1e4, *, backend="cuda", 
 _DEVICE_OPTIONS = ("rtol", "tier", "h_min", "h_max", "melting", "runaway_fraction")
 
 
+def cpu_only_reason(scene, rtol=1e-2, *, melting=True, runaway_fraction=None):
+    """Why the device search cannot take ``scene`` (a model term), or None where it can.
+
+    The device's target is homogeneous with constant properties (a row of floats, the exact
+    target): a stack whose heat reaches below its top layer (``"layered_target"``) or a target
+    whose k and c follow its temperature table by more than the property budget at ``rtol``
+    (``"temperature_target"``) is solved by the CPU search, which meshes it
+    (:func:`solve_scenes`, which hands such scenes to its fallback in this one process).
+    """
+    if not (scene.target_layers or scene.target_table):
+        return None
+    from skidmc.solver.model import build_model
+
+    extra = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
+    terms = build_model(scene, meshes=False, melting=melting, rtol=rtol, **extra).terms
+    return next((t for t in ("layered_target", "temperature_target") if t in terms), None)
+
+
 def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full",
                  h_min=1e-3, h_max=1e4, melting=True, runaway_fraction=None, **options):
     """Full-tier results of many scenes through the device search, one per scene, in order.
@@ -277,13 +296,9 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     censor_names = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
     results = []
     for scene, o in zip(scenes, out):
-        # The device's target is homogeneous with constant properties (a row of floats): a
-        # stack whose heat reaches below its top layer, or a target whose k and c follow its
-        # temperature table, goes to the fallback (the CPU search meshes them).
-        layered = bool(scene.target_layers or scene.target_table) and bool(
-            {"layered_target", "temperature_target"} & set(build_model(
-                scene, meshes=False, melting=melting, rtol=rtol, **extra).terms))
-        if layered or o[device.OUT_STATUS] != device.STATUS_OK:
+        cpu_only = cpu_only_reason(scene, rtol, melting=melting,
+                                   runaway_fraction=runaway_fraction)
+        if cpu_only is not None or o[device.OUT_STATUS] != device.STATUS_OK:
             try:
                 results.append(fallback(scene, rtol=rtol, h_min=h_min, h_max=h_max,
                                         melting=melting, **extra))
