@@ -12,7 +12,11 @@ rtol, in rounds, each round side by side on the same machine load:
   tree (``git archive <commit> src | tar -x -C /tmp/base``), side by side;
 * ``2 workers, new pool``: ``shutdown_workers()`` then a batch: a new pool from the forkserver
   this process already has (a second pool, or the replacement of a crashed one);
-* ``2 workers, warm pool``: the pool ``evaluate_batch`` keeps between calls.
+* ``2 workers, warm pool``: the pool ``evaluate_batch`` keeps between calls;
+* ``2 threads, first batch of a process``: as the first pool, with ``scheduler="threads"``
+  (:class:`skidmc.ensemble.executors.ThreadExecutor`): the fresh process loads the kernels
+  itself, and no worker starts;
+* ``2 threads``: ``scheduler="threads"`` in this process, kernels loaded.
 
 Efficiency = rate on 2 workers / (2 x rate in process). Also: the solver's own time summed
 over the batch (``BatchResult.wall_time``), so that "outside the solver" (start-up, scheduling,
@@ -90,13 +94,14 @@ def pool_ready_seconds(workers=2):
     return seconds
 
 
-def _measure(scenes, options, workers):
+def _measure(scenes, options, workers, scheduler=None):
     """(BatchResult, wall [s], CPU [s] of this process, the pool's workers and forkserver)."""
     import skidmc
 
     before = _workers_cpu()
     c0, t0 = time.process_time(), time.perf_counter()
-    res = skidmc.evaluate_batch(scenes, options, workers=workers)
+    extra = {} if scheduler is None else {"scheduler": scheduler}
+    res = skidmc.evaluate_batch(scenes, options, workers=workers, **extra)
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0
     after = _workers_cpu()
@@ -115,22 +120,24 @@ def _scenes(n, seed):
     return [scene for _, _, scene in study_scenes.draw(n // 3 + 1, seed)][:n]
 
 
-def child(n, rtol, seed):
-    """A fresh process's first batch on 2 workers (forkserver and pool started by it)."""
+def child(n, rtol, seed, scheduler=None):
+    """A fresh process's first batch on 2 workers (forkserver and pool started by it), or on 2
+    threads (``scheduler="threads"``: the kernels loaded by it)."""
     scenes = _scenes(n, seed)
-    res, wall, cpu = _measure(scenes, {"rtol": rtol}, 2)
+    res, wall, cpu = _measure(scenes, {"rtol": rtol}, 2, scheduler)
     print(json.dumps({"wall": wall, "cpu": cpu, "solver": float(res.wall_time.sum()),
                       "digest": _digest(res)}))
 
 
-def _first_pool(n, rtol, seed, src):
+def _first_pool(n, rtol, seed, src, scheduler=None):
     # Each tree its own numba cache (skidmc._numba_cache keys it by the tree's source): the
     # NUMBA_CACHE_DIR this process set would make the trees overwrite each other's kernels.
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env["PYTHONPATH"] = str(src)
+    extra = [] if scheduler is None else ["--scheduler", scheduler]
     out = subprocess.run([sys.executable, __file__, "--child", "--n", str(n), "--rtol",
-                          repr(rtol), "--seed", str(seed)], env=env, capture_output=True,
-                         text=True, check=True)
+                          repr(rtol), "--seed", str(seed), *extra], env=env,
+                         capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -147,17 +154,19 @@ def run(n, rtol, rounds, seed, base=None):
     cases = ["in process", "2 workers, first pool of a process"]
     if base is not None:
         cases.append("2 workers, first pool of a process, base tree")
-    cases += ["2 workers, new pool", "2 workers, warm pool"]
+    cases += ["2 workers, new pool", "2 workers, warm pool",
+              "2 threads, first batch of a process", "2 threads"]
     for r in range(rounds):
         for case in cases:
             workers = 1 if case == "in process" else 2
-            if case.startswith("2 workers, first pool"):
-                got = _first_pool(n, rtol, seed, base if "base" in case else here)
+            scheduler = "threads" if case.startswith("2 threads") else None
+            if "first" in case:
+                got = _first_pool(n, rtol, seed, base if "base" in case else here, scheduler)
                 wall, cpu, solver, digest = got["wall"], got["cpu"], got["solver"], got["digest"]
             else:
                 if case == "2 workers, new pool":
                     executors.shutdown_workers()
-                res, wall, cpu = _measure(scenes, options, workers)
+                res, wall, cpu = _measure(scenes, options, workers, scheduler)
                 solver, digest = float(res.wall_time.sum()), _digest(res)
             if reference is None:
                 reference = digest
@@ -188,7 +197,8 @@ def markdown(args, scenes, rows, ready, load_before, load_after):
         f"Batch: {len(scenes)} scenes drawn from the shipped studies' ensembles "
         "(benchmarks/study_scenes.py: paper-series1, paper-series2, sobol-series1, with "
         "temperature-dependent-target variants), `evaluate_batch(scenes, {'rtol': "
-        f"{args.rtol:g}}}, workers=w)`. Efficiency = (rate on 2 workers) / (2 x rate in process "
+        f"{args.rtol:g}}}, workers=w)` (the thread cases with `scheduler='threads'`). "
+        "Efficiency = (rate on 2 workers) / (2 x rate in process "
         "in the same round). Outside solver = 1 - (summed solver time) / (workers x wall). CPU = "
         "CPU seconds of this process, of the pool's workers and of the forkserver that forks "
         "them during the batch (/proc); CPU efficiency = in-process CPU / that CPU: what the "
@@ -233,11 +243,12 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=45)
     parser.add_argument("--base", help="the src folder of another tree: its first pool too")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--scheduler", help=argparse.SUPPRESS)
     parser.add_argument("--out", default=str(ROOT / "results" / "benchmarks" /
                                              "batch_overhead.md"))
     args = parser.parse_args(argv)
     if args.child:
-        child(args.n, args.rtol, args.seed)
+        child(args.n, args.rtol, args.seed, args.scheduler)
         return 0
     load_before = ", ".join(f"{v:.2f}" for v in os.getloadavg())
     scenes, rows, ready = run(args.n, args.rtol, args.rounds, args.seed, args.base)

@@ -347,8 +347,10 @@ def test_run_scheduler_values(tmp_path, tiny, cli_runs, capsys, monkeypatch):
     with pytest.raises(SystemExit):
         main(["run", "--help"])
     usage = " ".join(capsys.readouterr().out.split())
-    assert "--scheduler {local,dask,tcp://host:port}" in usage
-    assert "local (worker processes on this machine, the default), dask" in usage
+    assert "--scheduler {local,threads,dask,tcp://host:port}" in usage
+    assert "local (worker processes on this machine, the default), threads (--workers " \
+        "threads of this process" in usage
+    assert "dask (a local dask cluster" in usage
     out = tmp_path / "s.h5"
     assert main(["run", str(tiny), "--out", str(out), "--scheduler", "tcp:/nowhere"]) == 2
     err = capsys.readouterr().err

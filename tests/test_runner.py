@@ -364,6 +364,34 @@ def test_dask_cluster_equals_local_run(tmp_path, study_file, reference):
     _assert_same_data(path, reference)
 
 
+@real_solver
+def test_threads_equal_a_local_run(tmp_path, study_file, reference):
+    # scheduler="threads": the same chunks on threads of this process (the kernels release the
+    # GIL); every number as the in-process reference, and no worker process started.
+    pools = dict(executors.POOLS)
+    report = execute_study(study_file, tmp_path / "threads.h5", workers=2, chunk_size=3,
+                           scheduler="threads", progress=False, timeline=True)
+    _assert_same_data(report.path, reference)
+    assert report.workers == 2 and report.chunks == 4   # 12 rows, 3 per chunk
+    assert set(report.worker_peak_rss_mib) == {os.getpid()}
+    assert executors.POOLS == pools
+
+
+@real_solver
+def test_evaluate_batch_on_threads_identical_ordered():
+    options = {"rtol": 1e-2}
+    pools = dict(executors.POOLS)
+    one = evaluate_batch(_ROWS, options, base="paper-quartz")
+    threads = evaluate_batch(_ROWS, options, base="paper-quartz", workers=2, chunk_size=2,
+                             scheduler="threads")
+    _assert_same_batch(one, threads)
+    assert list(threads.status) == ["ok", "ok", "failed", "ok", "ok", "ok", "ok"]
+    assert executors.POOLS == pools   # no worker process was started
+    assert executors.check_scheduler(" threads ") == "threads"
+    with pytest.raises(executors.SchedulerError, match="'threads'"):
+        evaluate_batch(_ROWS, options, base="paper-quartz", workers=2, scheduler="thread")
+
+
 def _done_count(path: Path) -> int:
     """Samples written so far, read while the writer holds the file (no HDF5 file lock)."""
     try:

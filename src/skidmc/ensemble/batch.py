@@ -16,7 +16,15 @@ from skidmc.ensemble.evaluate import (
     resolve_solver,
     solver_kwargs,
 )
-from skidmc.ensemble.executors import Chunk, DaskExecutor, default_workers, shared_pool
+from skidmc.ensemble.executors import (
+    LOCAL_SCHEDULERS,
+    Chunk,
+    DaskExecutor,
+    ThreadExecutor,
+    check_scheduler,
+    default_workers,
+    shared_pool,
+)
 from skidmc.ensemble.schedule import Schedule, run_chunks
 from skidmc.scene import NUMERIC_KEYS, Scene
 
@@ -57,8 +65,11 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         Samples per chunk sent to a worker (default: sized by time, see the module docstring).
         Does not change any result.
     scheduler : str or distributed.Client, optional
-        ``"dask"`` or a dask Client/address instead of local processes (as in
-        :func:`run_study`).
+        ``"threads"``: `workers` threads of this process instead of worker processes (no
+        start-up and no kernel load, so a first batch of a few hundred heights runs near
+        `workers` times the in-process rate; but a crash in one sample ends the process:
+        :class:`~skidmc.ensemble.executors.ThreadExecutor`). ``"dask"`` or a dask
+        Client/address instead of local processes (as in :func:`run_study`).
     solver : callable, optional
         Used instead of :func:`skidmc.solver.critical_height` (default), called as
         ``solver(scene, **solver_options)`` and returning an object with ``critical_height``,
@@ -82,8 +93,9 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         resolve_solver(solver)  # a TypeError now rather than one per sample
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1 (or None: all CPUs), got {workers!r}")
-    if scheduler in (None, "local") and ((workers or default_workers()) == 1
-                                         or kwargs.get("backend", "cpu") != "cpu"):
+    scheduler = check_scheduler(scheduler)
+    if scheduler in LOCAL_SCHEDULERS and ((workers or default_workers()) == 1
+                                          or kwargs.get("backend", "cpu") != "cpu"):
         # The GPU backend takes the whole batch in this process (one kernel launch per
         # LAUNCH_SIZE scenes); worker processes would only share the one GPU.
         return evaluate_here(scenes, kwargs, base, solver)
@@ -100,6 +112,8 @@ def _evaluate_rows_parallel(rows: list, kwargs: dict, base: Scene | None, worker
         return out
     if scheduler in (None, "local"):
         executor, owned = shared_pool(workers or default_workers()), False
+    elif scheduler == "threads":
+        executor, owned = ThreadExecutor(workers or default_workers()), True
     else:
         executor, owned = DaskExecutor(None if scheduler == "dask" else scheduler, workers), True
 

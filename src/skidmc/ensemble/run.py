@@ -68,12 +68,14 @@ import numpy as np
 
 from skidmc.ensemble.evaluate import BatchResult, resolve_solver, solver_kwargs
 from skidmc.ensemble.executors import (
+    LOCAL_SCHEDULERS,
     POOLS,
     Chunk,
     ChunkOut,
     DaskExecutor,
     InlineExecutor,
     ProcessExecutor,
+    ThreadExecutor,
     check_scheduler,
     default_workers,
 )
@@ -301,14 +303,16 @@ def _open_result_file(study: Study, path: Path, action: str, work: Path) -> Ense
 def _executor(scheduler, use_dask: bool, workers: int | None):
     """(executor, owned): owned executors are shut down after the run; a warm pool that
     :func:`evaluate_batch` left running is used as it is and left running."""
-    if scheduler in (None, "local") and not use_dask:
+    if scheduler in LOCAL_SCHEDULERS and not use_dask:
         slots = workers or default_workers()
         if slots == 1:
             return InlineExecutor(), True
+        if scheduler == "threads":
+            return ThreadExecutor(slots), True
         if slots in POOLS:
             return POOLS[slots], False
         return ProcessExecutor(slots), True
-    return DaskExecutor(None if scheduler == "local" else scheduler, workers), True
+    return DaskExecutor(None if scheduler in LOCAL_SCHEDULERS else scheduler, workers), True
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -589,7 +593,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
     # date: then no worker is wanted at all).
     executor, owned, t0 = None, False, None
     lock = None
-    if scheduler in (None, "local") and not use_dask and (workers or default_workers()) > 1 \
+    if scheduler in LOCAL_SCHEDULERS and not use_dask and (workers or default_workers()) > 1 \
             and not _target_exists(study, out):
         executor, owned = _executor(scheduler, use_dask, workers)
         t0 = time.perf_counter()
@@ -610,7 +614,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
                     f"{study.file}: solver.backend = 'cuda' cannot run here: {why.split(':')[0]}"
                     "; use backend = 'cpu' (the same kernel on the CPUs) or a machine with a "
                     "CUDA GPU")
-        if study.solver.backend != "cpu" and scheduler in (None, "local") and not use_dask:
+        if study.solver.backend != "cpu" and scheduler in LOCAL_SCHEDULERS and not use_dask:
             # The GPU backend solves each chunk in one launch: one local process drives the GPU
             # (worker processes would only queue on it).
             workers = 1
@@ -632,7 +636,7 @@ def execute_study(study: Study | str | os.PathLike, out=None, *, n: int | None =
             return report
         # An owned dask cluster is reached before any file is made, so that an unreachable
         # scheduler leaves nothing behind.
-        if executor is None and not (scheduler in (None, "local") and not use_dask):
+        if executor is None and not (scheduler in LOCAL_SCHEDULERS and not use_dask):
             executor, owned = _executor(scheduler, use_dask, workers)
         work = path.with_name(path.name + ".new")  # --force: the new file until complete
         created = action == "new" or (action == "replace" and not work.exists())
@@ -919,9 +923,11 @@ def run_study(study_path_or_obj: Study | str | os.PathLike, out=None, n: int | N
     workers : int, optional
         Parallel workers (default: the CPUs available). 1 evaluates in this process.
     scheduler : str or distributed.Client, optional
-        None or ``"local"``: local processes; ``"dask"``: a dask LocalCluster of `workers`
-        processes; an address (``"tcp://host:8786"``) or a Client: that dask cluster (its workers
-        must be able to import skidmc).
+        None or ``"local"``: local processes; ``"threads"``: `workers` threads of this process
+        (no start-up, no isolation: :class:`~skidmc.ensemble.executors.ThreadExecutor`);
+        ``"dask"``: a dask LocalCluster of `workers` processes; an address
+        (``"tcp://host:8786"``) or a Client: that dask cluster (its workers must be able to
+        import skidmc).
     resume : bool
         Continue an unfinished file of the same study (a missing file starts a new run).
     force : bool

@@ -845,7 +845,7 @@ def run(study: HazardStudy, options):
 
     scheduler = check_scheduler(options.scheduler)
     executor = None
-    if scheduler not in (None, "local"):  # one dask client for every solver call
+    if scheduler not in (None, "local", "threads"):  # one dask client for every solver call
         executor = DaskExecutor(None if scheduler == "dask" else scheduler, options.workers)
         scheduler = executor.client
     log.start(keep=info["exists"])
