@@ -157,6 +157,23 @@ def test_scenes_the_device_hands_back_are_solved_by_the_cpu_search():
     assert res.critical_height == critical_height(scene, rtol=3e-3).critical_height
 
 
+def test_scenes_the_device_cannot_take_are_solved_on_threads_as_one_by_one():
+    # Tabled and layered targets never reach the device; the CPU search solves them on
+    # threads (its kernels release the GIL), with the numbers of a serial solve.
+    scenes = [get_preset("paper-quartz"), get_preset("paper-quartz").replace(target="fused-quartz"),
+              get_preset("paper-alumina-smooth").replace(target="alumina-85"),
+              get_preset("paper-gold").replace(target="gold-stack-report")]
+    threaded = solve_scenes(scenes, backend="cpu", rtol=1e-2, threads=2)
+    serial = solve_scenes(scenes, backend="cpu", rtol=1e-2, threads=1)
+    assert [r.method for r in threaded] == ["device", "brent", "brent", "brent"]
+    for a, b, scene in zip(threaded, serial, scenes):
+        assert a.critical_height == b.critical_height and a.error_estimate == b.error_estimate
+        if a.method == "brent":
+            assert a.critical_height == critical_height(scene, rtol=1e-2).critical_height
+    with pytest.raises(SceneError, match="threads"):
+        solve_scenes(scenes[:1], backend="cpu", threads=0)
+
+
 def test_bad_options_name_the_key_and_value():
     scene = get_preset("paper-quartz")
     with pytest.raises(SceneError, match="backend"):

@@ -311,10 +311,12 @@ def _add_run_parser(subparsers) -> None:
                      "the hazard kind refuses --yes)")
     run.add_argument("--workers", type=_positive_int,
                      help="parallel workers, >= 1 (default: all CPUs)")
-    run.add_argument("--scheduler", metavar="{local,dask,tcp://host:port}",
+    run.add_argument("--scheduler", metavar="{local,threads,dask,tcp://host:port}",
                      help="where samples are evaluated: local (worker processes on this "
-                     "machine, the default), dask (a local dask cluster of --workers processes) "
-                     "or tcp://host:port (a running dask scheduler)")
+                     "machine, the default), threads (--workers threads of this process: no "
+                     "start-up, but a crash in one sample ends the run), dask (a local dask "
+                     "cluster of --workers processes) or tcp://host:port (a running dask "
+                     "scheduler)")
     again = run.add_mutually_exclusive_group()
     again.add_argument("--resume", action="store_true", help="finish an interrupted run")
     again.add_argument("--force", action="store_true",
@@ -380,8 +382,8 @@ def _confirm_run(size, args: argparse.Namespace) -> bool:
 
 def _warn_device_scenes(study) -> None:
     """With ``solver.backend = "cuda"``, name the study's scenes the device search cannot take
-    (:func:`skidmc.solver.cuda.cpu_only_reason`): the run solves them with the CPU search in its
-    one process, slower than ``backend = "cpu"`` on worker processes."""
+    (:func:`skidmc.solver.cuda.cpu_only_reason`): the run solves them with the CPU search on its
+    one process's threads, no faster than ``backend = "cpu"``."""
     solver = getattr(study, "solver", None)
     if getattr(solver, "backend", "cpu") != "cuda" or not getattr(study, "scenes", None):
         return
@@ -393,8 +395,8 @@ def _warn_device_scenes(study) -> None:
         named = ", ".join(f"{name} ({why})" for name, why in cpu_only)
         print(f"skidmc run: warning: solver.backend = 'cuda', but {len(cpu_only)} of "
               f"{len(study.scenes)} scenes cannot run on the device: {named}. The device takes "
-              "constant, homogeneous targets only; these scenes are solved by the CPU search in "
-              "this one process, slower than backend = 'cpu' with --workers (docs/gpu.md)",
+              "constant, homogeneous targets only; these scenes are solved by the CPU search on "
+              "this process's threads, no faster than backend = 'cpu' (docs/gpu.md)",
               file=sys.stderr)
 
 

@@ -237,7 +237,7 @@ def cpu_only_reason(scene, rtol=1e-2, *, melting=True, runaway_fraction=None):
     target): a stack whose heat reaches below its top layer (``"layered_target"``) or a target
     whose k and c follow its temperature table by more than the property budget at ``rtol``
     (``"temperature_target"``) is solved by the CPU search, which meshes it
-    (:func:`solve_scenes`, which hands such scenes to its fallback in this one process).
+    (:func:`solve_scenes` hands such scenes to its fallback, on this process's threads).
     """
     if not (scene.target_layers or scene.target_table):
         return None
@@ -249,7 +249,8 @@ def cpu_only_reason(scene, rtol=1e-2, *, melting=True, runaway_fraction=None):
 
 
 def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full",
-                 h_min=1e-3, h_max=1e4, melting=True, runaway_fraction=None, **options):
+                 h_min=1e-3, h_max=1e4, melting=True, runaway_fraction=None, threads=None,
+                 **options):
     """Full-tier results of many scenes through the device search, one per scene, in order.
 
     Parameters
@@ -258,11 +259,16 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     backend : {"cuda", "cpu"}
         Where the device search runs (:func:`critical_heights`).
     fallback : callable, optional
-        Solver for the scenes the device search hands back (default
-        :func:`skidmc.solver.critical_height`), called as ``fallback(scene, rtol=, h_min=,
-        h_max=, melting=, runaway_fraction=)``.
+        Solver for the scenes the device cannot take (:func:`cpu_only_reason`) or hands back
+        (default :func:`skidmc.solver.critical_height`), called as ``fallback(scene, rtol=,
+        h_min=, h_max=, melting=, runaway_fraction=)``.
     rtol, tier, h_min, h_max, melting, runaway_fraction
         As :func:`skidmc.solver.critical_height`; ``tier`` must be "full".
+    threads : int, optional
+        Threads that run the fallback on those scenes (the solver's kernels release the GIL,
+        so they run side by side; the results are the same on any number). Default: every
+        CPU this process may use where the fallback is :func:`skidmc.solver.critical_height`,
+        1 for any other (a caller's solver need not be thread-safe).
 
     Returns
     -------
@@ -271,12 +277,16 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
         search answered, the fallback's result otherwise), or the exception the fallback
         raised for that scene.
     """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from skidmc._system import available_cpus
     from skidmc.physics.fast import CENSOR_ABOVE, CENSOR_BELOW, CENSOR_NONE
     from skidmc.physics.mechanics import EXIT_KINDS
     from skidmc.solver import device
     from skidmc.solver.fast import SCENE_FIELDS, _scene_values
     from skidmc.solver.model import build_model
     from skidmc.solver.results import HeightResult
+    from skidmc.solver.search import critical_height
 
     if options:
         key = sorted(options)[0]
@@ -285,30 +295,34 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     if tier != "full":
         raise SceneError("tier", tier, f"backend={backend!r} runs the full tier; the fast tier "
                          "runs on the CPU (backend='cpu')")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
+                                or threads < 1):
+        raise SceneError("threads", threads, "must be an integer >= 1 (or None)")
     if fallback is None:
-        from skidmc.solver.search import critical_height as fallback
+        fallback = critical_height
+    if threads is None:
+        threads = available_cpus() if fallback is critical_height else 1
     scenes = list(scenes)
-    rows = np.array([_scene_values(s) for s in scenes],
-                    dtype=np.float64).reshape(len(scenes), len(SCENE_FIELDS))
-    out, _ = critical_heights(rows, rtol, h_min, h_max, backend=backend, melting=melting,
-                              runaway_fraction=runaway_fraction)
     extra = {} if runaway_fraction is None else {"runaway_fraction": runaway_fraction}
+    # Scenes a row of floats cannot carry never reach the device.
+    take = [i for i, scene in enumerate(scenes)
+            if cpu_only_reason(scene, rtol, melting=melting,
+                               runaway_fraction=runaway_fraction) is None]
+    rows = np.array([_scene_values(scenes[i]) for i in take],
+                    dtype=np.float64).reshape(len(take), len(SCENE_FIELDS))
+    out = (critical_heights(rows, rtol, h_min, h_max, backend=backend, melting=melting,
+                            runaway_fraction=runaway_fraction)[0] if take
+           else np.zeros((0, device.OUT_SIZE)))
     censor_names = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
-    results = []
-    for scene, o in zip(scenes, out):
-        cpu_only = cpu_only_reason(scene, rtol, melting=melting,
-                                   runaway_fraction=runaway_fraction)
-        if cpu_only is not None or o[device.OUT_STATUS] != device.STATUS_OK:
-            try:
-                results.append(fallback(scene, rtol=rtol, h_min=h_min, h_max=h_max,
-                                        melting=melting, **extra))
-            except Exception as exc:  # noqa: BLE001 - the caller records it per sample
-                results.append(exc)
+    results = [None] * len(scenes)
+    for i, o in zip(take, out):
+        if o[device.OUT_STATUS] != device.STATUS_OK:
             continue
+        scene = scenes[i]
         model = build_model(scene, meshes=False, melting=melting, rtol=rtol, **extra)
         height = float(o[device.OUT_HEIGHT])
         censored = censor_names[int(o[device.OUT_CENSOR])]
-        results.append(HeightResult(
+        results[i] = HeightResult(
             critical_height=height, censored=censored,
             evaluations=int(o[device.OUT_EVALUATIONS]),
             flags=model.flags + model.height_flags(height),
@@ -318,5 +332,21 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
             exit_kind=EXIT_KINDS[int(o[device.OUT_EXIT_CODE])], terms=model.terms,
             extrapolated=censored is None,
             richardson_correction=float(o[device.OUT_CORRECTION]),
-            melt_bias_estimate=float(o[device.OUT_MELT_BIAS])))
+            melt_bias_estimate=float(o[device.OUT_MELT_BIAS]))
+
+    def solve(i):
+        try:
+            return fallback(scenes[i], rtol=rtol, h_min=h_min, h_max=h_max, melting=melting,
+                            **extra)
+        except Exception as exc:  # noqa: BLE001 - the caller records it per sample
+            return exc
+
+    rest = [i for i, res in enumerate(results) if res is None]
+    if threads > 1 and len(rest) > 1:
+        with ThreadPoolExecutor(min(threads, len(rest)), thread_name_prefix="skidmc") as pool:
+            answers = list(pool.map(solve, rest))
+    else:
+        answers = [solve(i) for i in rest]
+    for i, res in zip(rest, answers):
+        results[i] = res
     return results
