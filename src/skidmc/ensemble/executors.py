@@ -272,11 +272,12 @@ class ThreadExecutor:
     """Threads of this process (``scheduler="threads"``): no worker to start or warm up.
 
     The solver's kernels release the GIL (``nogil``), so threads run simulations side by side:
-    262 heights on 2 threads took 0.52x the time of one (temperature-dependent targets at rtol
-    1e-2, where the kernel is ~90 % of a height; docs/performance.md), and the first batch pays
-    no process start and no kernel load. What they give up is isolation: a sample that crashes
-    the interpreter (a fault in compiled code) ends the whole run instead of one worker, and the
-    threads share this process's memory. Results are bit for bit those of any other scheduler.
+    62 heights on 2 threads took 0.52x the time of one (temperature-dependent targets at rtol
+    1e-2; ``benchmarks/batch_overhead.py`` measures 300 study scenes at 1e-3,
+    docs/performance.md), and the first batch pays no process start and no kernel load. What
+    they give up is isolation: a sample that crashes the interpreter (a fault in compiled code)
+    ends the whole run instead of one worker, and the threads share this process's memory.
+    Results are bit for bit those of any other scheduler.
     """
 
     def __init__(self, workers: int) -> None:
