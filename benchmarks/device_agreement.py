@@ -166,7 +166,9 @@ def _markdown(trees, args, load_before, load_after):
         "errors above the device's estimate plus the reference's);",
         "- time per height: the device's whole batch on one thread over the scene count "
         "(smaller of the repeats and rounds); the CPU search per scene in process, mean over "
-        "all scenes and over those the device answered.",
+        "all scenes and over those the device answered, one pass per tree (not alternated: "
+        "both trees run the same CPU search, so the difference between its two rows is the "
+        "machine's noise).",
         "",
         "| rtol | tree | answered / scenes | agreement median, p90, max [rtol] | error / estimate "
         "median, max | beyond | ref. estimate max | device evaluations (mean) | device "
