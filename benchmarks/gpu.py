@@ -14,6 +14,12 @@ replacement up to each size. For each rtol (1e-2, 3e-3, 1e-3), side by side in o
   the agreement of its heights with the CPU full tier on the common scenes (worst and median
   |H_gpu / H_cpu - 1|, share within rtol, share handed back to the CPU search).
 
+The rows are the ensemble's sampled inputs as constant-property scenes (a row of floats): the
+study itself runs its ceramics with k(T), c(T) tables and its gold as a layered stack, which the
+device does not take (:func:`skidmc.solver.cuda.cpu_only_reason`; docs/gpu.md). So these
+figures are the device search's speed on such scenes, not what a GPU does for the shipped
+studies (nothing yet).
+
 Writes ``results/benchmarks/gpu.md`` and ``gpu.json``. Where no GPU is usable the GPU columns say
 why; nothing is estimated in their place.
 """
