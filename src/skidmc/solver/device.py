@@ -479,6 +479,16 @@ def _fill_scalars(row, pressure, omega, t_exit, slide_s, slide_c, latent, runawa
 
 
 @njit(cache=True)
+def _modelled_latent(row, melting, t_run):
+    """The HE's latent heat as the model takes it [J/kg]: its heat of fusion where melting is
+    modelled, the scene has friction and the HE melts below the runaway temperature ``t_run``
+    [K] (the "melting" term of :func:`skidmc.solver.model.build_model`), else 0."""
+    if melting and row[_HE_L] > 0.0 and row[_HE_TM] < t_run and row[_MU] > 0.0:
+        return row[_HE_L]
+    return 0.0
+
+
+@njit(cache=True)
 def _one_margin(row, x, level, melt_width, melt_spread, melting, runaway_fraction, work,
                 history, sc, info):
     """:func:`device_margin`'s compiled part."""
@@ -487,7 +497,7 @@ def _one_margin(row, x, level, melt_width, melt_spread, melting, runaway_fractio
         row[_MU], pressure, row[_MASS], row[_DIAMETER], row[_ANGLE], row[_TILT])
     t_run = model_runaway_temperature(row[_Z], row[_TA], row[_Q] / row[_HE_C], t_exit,
                                       runaway_fraction)
-    latent = row[_HE_L] if melting and row[_HE_TM] < t_run and row[_MU] > 0.0 else 0.0
+    latent = _modelled_latent(row, melting, t_run)
     _fill_scalars(row, pressure, omega, t_exit, slide_s, slide_c, latent, runaway_fraction,
                   melt_spread, sc)
     n_cells, tol_temperature = _build_level(row, sc, level, work, history)
@@ -580,10 +590,8 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     adiabatic_rise = row[_Q] / row[_HE_C]
     t_run = model_runaway_temperature(row[_Z], row[_TA], adiabatic_rise, t_exit,
                                       runaway_fraction)
-    latent = row[_HE_L] if melting else 0.0
-    melting_term = latent > 0.0 and row[_HE_TM] < t_run
-    if not melting_term:
-        latent = 0.0
+    latent = _modelled_latent(row, melting, t_run)
+    melting_term = latent > 0.0
     if melting_term and ignition_temperature(row[_Z], row[_TA], adiabatic_rise,
                                              t_exit) < row[_HE_TM]:
         # The CPU search measures the melting width's bias on such scenes (and may narrow it).
