@@ -1,0 +1,128 @@
+"""The compiled root finders (skidmc.solver.finders): the library algorithms they write out,
+bit for bit, and driving them from compiled code (the device search's way)."""
+
+import math
+import random
+import statistics
+
+import numpy as np
+import pytest
+from numba import njit
+from scipy.optimize import brentq
+
+from skidmc.solver import finders
+from skidmc.solver.finders import ASK, FINDER_STATE, ROOT
+from skidmc.solver.roots import brent_root, go_side_root, prior_bisection_root
+
+
+def test_normal_functions_equal_statistics_normaldist_bit_for_bit():
+    # The prior bisection placed its points with statistics.NormalDist; the compiled finder
+    # must place them on the same bits, or the CPU search's heights would change.
+    dist = statistics.NormalDist()
+    rng = random.Random(7)
+    zs = [rng.gauss(0.0, 2.0) for _ in range(20_000)] + [rng.uniform(-38.0, 38.0)
+                                                          for _ in range(5_000)]
+    ps = ([rng.random() for _ in range(20_000)] + [10.0 ** rng.uniform(-300.0, -1.0)
+                                                   for _ in range(5_000)])
+    ps += [1.0 - p for p in ps if 0.0 < 1.0 - p < 1.0]
+    assert all(finders.normal_cdf(z) == dist.cdf(z) for z in zs)
+    assert all(finders.normal_quantile(p) == dist.inv_cdf(p) for p in ps if p > 0.0)
+
+
+def _recording(f):
+    calls = []
+
+    def g(x):
+        calls.append(x)
+        return f(x)
+
+    return g, calls
+
+
+@pytest.mark.parametrize("shape", ["linear", "cubic", "kinked", "capped"])
+def test_brent_phase_takes_scipy_brentq_steps_bit_for_bit(shape):
+    # After bracketing, the finder runs scipy's brentq (xtol, rtol = 4 eps) written out: the
+    # same points asked in the same order and the same root, to the last bit.
+    root, x_tol, horizon = 0.4137, 3e-4, 0.7
+
+    def f(x):
+        d = x - root
+        if shape == "linear":
+            return -1.2 * d
+        if shape == "cubic":
+            return -d - 3.0 * d ** 3 + 0.2 * d * d
+        if shape == "kinked":
+            return -1.3 * d + 4.0 * d * d if d >= 0.0 else -0.9 * d - 0.2 * d * d
+        return math.inf if d < -0.05 else -1.1 * d   # no event far below the root
+
+    st = np.zeros(1, dtype=FINDER_STATE)
+    finders.finder_reset(st)
+    code, value = finders.brent_start(st, -0.3, -5.0, 5.0, x_tol, horizon, 0.05)
+    asked = []
+    while code == ASK and st[0]["mode"] != 4:   # until bracketed (mode 4: Brent)
+        asked.append(value)
+        code, value = finders.finder_step(st, np.empty((2, 1)), f(value))
+    lo, hi = float(st[0]["lo_x"]), float(st[0]["hi_x"])
+    assert f(lo) > 0.0 >= f(hi)
+    brent_asked = []
+    while code == ASK:
+        brent_asked.append(value)
+        code, value = finders.finder_step(st, np.empty((2, 1)), f(value))
+    assert code == ROOT
+
+    def bounded(x):
+        m = f(x)
+        return m if math.isfinite(m) else 2.0 * horizon + 1.0
+
+    g, calls = _recording(bounded)
+    expected = brentq(g, lo, hi, xtol=x_tol, rtol=4 * np.finfo(float).eps)
+    assert value == expected
+    assert brent_asked == calls[2:]      # scipy evaluates the bracket's ends first
+    assert len(brent_asked) >= 1
+
+
+def test_brent_root_censors_at_the_bounds_it_was_given():
+    # A margin positive everywhere: no event up to h_max, censored "above" at x_max exactly.
+    assert brent_root(lambda x: 0.3, -2.0, 1.5, 1e-3, 0.7, 1.0) == (1.5, "above")
+    assert brent_root(lambda x: -0.3, -2.0, 1.5, 1e-3, 0.7, 1.0) == (-2.0, "below")
+
+
+def test_finders_never_ask_outside_the_search_bounds():
+    # The guided finders give up rather than step outside (x_min, x_max): the search's bounds
+    # are the user's h_min and h_max.
+    root, x_tol = 1.49, 1e-4
+    g, calls = _recording(lambda x: -1.2 * (x - root))
+    res = go_side_root(g, 1.45, None, x_tol, -1.0, 1.5, guess_error=0.05)
+    assert all(-1.0 < x < 1.5 for x in calls)
+    assert res is None or abs(res - root) < x_tol
+    g, calls = _recording(lambda x: 0.3 if x < root else -0.3)
+    res = prior_bisection_root(g, 1.3, 0.1, x_tol, -1.0, 1.5)
+    assert all(-1.0 < x < 1.5 for x in calls)
+    assert res is None or abs(res - root) <= x_tol
+
+
+@njit(cache=True)
+def _compiled_search(root, x_guess, sigma, x_tol):
+    """A compiled caller drives the prior bisection on a jump margin (as the device search
+    drives the finders with its own runs): returns (root, simulations)."""
+    st = np.zeros(1, dtype=FINDER_STATE)
+    pts = np.empty((2, 8))
+    finders.finder_reset(st)
+    code, value = finders.prior_bisection_start(st, pts, x_guess, sigma, x_tol, -10.0, 10.0,
+                                                40, math.nan, False)
+    n = 0
+    while code == ASK:
+        m = 0.12 - 0.5 * (value - root) if value < root else -0.28 - 1.5 * (value - root) ** 0.45
+        n += 1
+        code, value = finders.finder_step(st, pts, m)
+    return (value if code == ROOT else math.nan), n
+
+
+def test_a_compiled_caller_finds_the_same_root_as_the_python_driver():
+    root, x_guess, sigma, x_tol = 5.118, 5.1, 0.02, 3e-4
+    found, n = _compiled_search(root, x_guess, sigma, x_tol)
+    g, calls = _recording(lambda x: 0.12 - 0.5 * (x - root) if x < root
+                          else -0.28 - 1.5 * (x - root) ** 0.45)
+    assert found == prior_bisection_root(g, x_guess, sigma, x_tol, -10.0, 10.0)
+    assert n == len(calls)
+    assert abs(found - root) <= x_tol   # a jump bracket of 2 x_tol: its midpoint within x_tol
