@@ -9,12 +9,13 @@ to be made and validated in both. Both now call the functions here, compiled wit
 arithmetic of a decision is one text: the CPU search (:func:`skidmc.solver.search._adaptive_pair`)
 calls them from Python, the device search from compiled code (a CUDA device function on a GPU).
 
-What remains path-specific, and why: how a root is found (the CPU search's guided, go-side and
-jump-aware finders of :mod:`skidmc.solver.roots` keep Python histories; the device search runs
-Brent's bracket in registers), and the actions the device cannot take (narrowing the melting
-width, whose bias the CPU search measures with an extra simulation, and levels above
-:data:`skidmc.solver.device.DEVICE_MAX_LEVEL`): there the device hands the scene to the CPU
-search.
+How a root is found is one text too: the root finders are compiled state machines
+(:mod:`skidmc.solver.finders`) that both searches drive with their own runs. What remains
+path-specific: how a run is made (:func:`skidmc.solver.simulate.simulate` on any model, or the
+device's run of a constant-property exact target on a thread's storage), and the actions the
+device cannot take (narrowing the melting width, whose bias the CPU search measures with an
+extra simulation, and levels above :data:`skidmc.solver.device.DEVICE_MAX_LEVEL`): there the
+device hands the scene to the CPU search.
 
 Every function is pure arithmetic on floats (no allocation, no Python objects), in the order
 the search has always computed it, so that the results are unchanged to the last bit

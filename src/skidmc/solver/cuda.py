@@ -30,7 +30,17 @@ import numpy as np
 from skidmc.errors import SceneError
 from skidmc.physics.fast import N_TIMES
 from skidmc.physics.records import KERNEL_RUN
-from skidmc.solver.device import HISTORY_SHAPE, MAX_CELLS, WORK_ROWS, critical_height_core
+from skidmc.solver.device import (
+    HISTORY_SHAPE,
+    MAX_CELLS,
+    POINTS_SHAPE,
+    PREFIX_SIZE,
+    RESULT_SIZE,
+    SEARCH_POINTS,
+    WORK_ROWS,
+    critical_height_core,
+)
+from skidmc.solver.finders import FINDER_STATE
 
 __all__ = [
     "BACKENDS",
@@ -110,10 +120,17 @@ def _thread(rows, rtol, h_min, h_max, melt_spread, melting, runaway_fraction, ta
         history = cuda.local.array(_HISTORY_SHAPE, np.float64)
         fast_work = cuda.local.array(_FAST_SHAPE, np.float64)
         info = cuda.local.array(1, KERNEL_RUN)   # the current run's input and outcome
-        coarse = cuda.local.array(8, np.float64)
-        fine = cuda.local.array(8, np.float64)
+        prefix = cuda.local.array(PREFIX_SIZE, np.float64)   # the search's linear prefix
+        coarse = cuda.local.array(RESULT_SIZE, np.float64)
+        fine = cuda.local.array(RESULT_SIZE, np.float64)
+        coarse_pts = cuda.local.array(POINTS_SHAPE, np.float64)
+        fine_pts = cuda.local.array(POINTS_SHAPE, np.float64)
+        st = cuda.local.array(1, FINDER_STATE)   # the root finder's state
+        fpts = cuda.local.array((2, SEARCH_POINTS), np.float64)
+        order = cuda.local.array(SEARCH_POINTS, np.int64)
         _core(rows[i], rtol, h_min, h_max, melt_spread, melting, runaway_fraction, table, gl_x,
-              gl_w, work, history, fast_work, info, coarse, fine, out[i])
+              gl_w, work, history, fast_work, info, prefix, coarse, fine, coarse_pts, fine_pts,
+              st, fpts, order, out[i])
 
 
 #: The types of :func:`_thread`'s arguments, in order: what ``scripts/compile_cuda_ptx.py``

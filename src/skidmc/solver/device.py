@@ -5,46 +5,55 @@ search of :func:`skidmc.solver.critical_height` on the same model: the exact tar
 HE meshed, the target through Duhamel's integral), the melting spread over each HE cell, and
 the scene's own plan (its regime, :func:`exit_regime_code`, chooses the first pair and its root
 tolerances through the same compiled functions of :mod:`skidmc.solver.plan` and
-:mod:`skidmc.solver.controller`). Then: the fast tier's height as first guess, a Richardson pair
-of levels, its a posteriori error estimate, and the same adaptive rounds (tighten the roots, or
-move the pair up a level) while that estimate exceeds ``rtol``: the estimate and each round's
-decision are the compiled functions of :mod:`skidmc.solver.controller` that the CPU search calls
-too. It calls the same compiled kernels as the CPU search
+:mod:`skidmc.solver.controller`). Then, step for step as the CPU search
+(:mod:`skidmc.solver.search`): the fast tier's height as first guess (or the root two levels
+down), each level's search by the same compiled root finders (:mod:`skidmc.solver.finders`:
+the go-side extrapolation, the prior bisection by signs with runs that stop at the exit, the
+guided bracket, bracketing and Brent's method), the runs of one search sharing their linear
+prefix, a Richardson pair of levels, its a posteriori error estimate, and the same adaptive
+rounds (tighten the roots from their own simulations, or move the pair up a level) while that
+estimate exceeds ``rtol``: the estimate and each round's decision are the compiled functions of
+:mod:`skidmc.solver.controller`. It calls the same compiled kernels as the CPU search
 (:func:`skidmc.physics.thermal.simulate_core`, :func:`skidmc.physics.fast.fast_height_core`,
 :func:`skidmc.physics.meshes.fill_meshes`, :func:`skidmc.physics.mechanics.impact_constants`
 and the model's scalar functions), on storage the caller owns: NumPy arrays on the CPU, a
 thread's local memory on the GPU (:mod:`skidmc.solver.cuda`). Nothing here allocates, raises or
-touches Python objects, which is what a CUDA device function needs. One run at one height is
-the CPU model's run to the last bit (:func:`device_margin`).
+touches Python objects, which is what a CUDA device function needs.
 
-Where it differs from the CPU search, and why
----------------------------------------------
-* Root finder: Brent's method (zeroin) on the margin m(ln H) = ln(t_ev / t_exit), capped at the
-  horizon ln(t_end / t_exit) where no event happens, from a bracket grown geometrically around
-  the guess (the CPU search's priors: the fast tier's measured scatter and shift, the fine
-  root's measured place above the coarse one). The CPU search's guided, go-side and
-  jump-aware finders (:mod:`skidmc.solver.roots`) keep a history of Python tuples and pick
-  among strategies by it, and its runs share a linear prefix and stop at the exit where only
-  the sign counts; Brent's bracket keeps every root within its tolerance on smooth margins and
-  on jumps alike, and fits in a few registers. Both honour the same root tolerance on the same
-  model, so the results agree within the tolerance (``tests/test_device.py`` and
-  ``benchmarks/device_agreement.py`` measure it), not bit for bit.
-* What is sent back to the CPU search (status :data:`STATUS_CPU`, the reason in
-  ``out[OUT_REASON]``, :data:`HANDBACK_REASONS`): scenes whose ignition temperature lies below
-  the melting point with melting modelled (the CPU search measures the melting width's bias
-  there with an extra simulation and may narrow the width), pairs that ask for a narrower
-  width, pairs that would have to move above :data:`DEVICE_MAX_LEVEL` (the thread's fixed-size
-  arrays), runs that outgrow the thread's flux history (:data:`DEVICE_HISTORY`), and any search
-  that fails (integration failure, no bracket within the evaluation cap): the CPU search then
-  gives the result, or the failure with its reason. Scenes the row of floats cannot carry go
-  there too, before any device work is trusted: layered targets whose heat reaches below the
-  top layer, and targets whose properties follow a temperature table ("temperature_target"; the
-  exact target has constant properties). The batch front end
-  (:func:`skidmc.solver.cuda.solve_scenes`) does this; no sample is lost.
-* Stalled runs: the CPU search's cap, the same compiled function
-  (:func:`skidmc.solver.simulate.run_cap`: 10x the most step attempts of the search's earlier
-  runs, at least 4,000 and 2,000 x 2^level, 12,500 x 2^level in any case), so a run that stalls
-  hands its scene to the CPU search after a few thousand attempts instead of 200,000.
+One search, two drivers
+-----------------------
+The search's decisions (which finder, where to simulate next, when a root is found, how the
+pair's estimate is measured and what the next round does) are compiled functions that both
+searches call; each search only runs the simulations they ask for, the CPU search through
+:func:`skidmc.solver.simulate.simulate`, this one through :func:`_margin` on the same kernel
+and inputs. One run at one height is the CPU model's run to the last bit (:func:`device_margin`),
+so on the scenes it takes the device search finds the CPU search's heights, error estimates
+and simulation counts to the last bit (``tests/test_device.py``;
+``benchmarks/heights_fingerprint.py``: 185 study and preset scenes at rtol 1e-2, 3e-3 and 1e-3).
+Across machines the last bits may differ: the kernels' fused multiply-adds are the compiling
+machine's choice (docs/model.md).
+
+What is sent back to the CPU search
+-----------------------------------
+Status :data:`STATUS_CPU`, the reason in ``out[OUT_REASON]`` (:data:`HANDBACK_REASONS`): scenes
+whose ignition temperature lies below the melting point with melting modelled (the CPU search
+measures the melting width's bias there with an extra simulation and may narrow the width),
+pairs that ask for a narrower width, pairs that would have to move above
+:data:`DEVICE_MAX_LEVEL` (the thread's fixed-size arrays), runs that outgrow the thread's flux
+history (:data:`DEVICE_HISTORY`), searches that need more than :data:`SEARCH_POINTS`
+simulations, and any search that fails (integration failure, stall, a finder that ends without
+a root, a refined root censored): the CPU search then gives the result, or the failure with its
+reason. Scenes the row of floats cannot carry go there too, before any device work is trusted:
+layered targets whose heat reaches below the top layer, and targets whose properties follow a
+temperature table ("temperature_target"; the exact target has constant properties). The batch
+front end (:func:`skidmc.solver.cuda.solve_scenes`) does this; no sample is lost. Stalled runs
+stop at the CPU search's cap, the same compiled function (:func:`skidmc.solver.simulate.run_cap`),
+so a run that stalls hands its scene back after a few thousand attempts instead of 200,000.
+
+One difference is left: the fast tier's first guess is not censored near the search bounds
+here (the CPU tier's ``_censor_near_bounds`` needs the scene's validity flags). Within the fast
+tier's error of h_min or h_max the CPU search starts from 1 m instead, and the two results may
+then differ within their tolerance.
 """
 
 from __future__ import annotations
@@ -72,7 +81,15 @@ from skidmc.physics.mechanics import (
 )
 from skidmc.physics.meshes import fill_meshes
 from skidmc.physics.records import HISTORY_ROWS, KERNEL_RUN, STATE_ROWS
-from skidmc.physics.thermal import simulate_core
+from skidmc.physics.thermal import (
+    _PX_VALID,
+    PREFIX_MAX_SCALE,
+    PREFIX_RESUME,
+    PREFIX_WRITE,
+    SIGN_COMMIT_FRACTION,
+    prefix_size,
+    simulate_core,
+)
 from skidmc.solver.controller import (
     DONE,
     MAX_ADAPTIVE_ROUNDS,
@@ -84,6 +101,25 @@ from skidmc.solver.controller import (
     next_round,
     pair_estimate,
     richardson_value,
+)
+from skidmc.solver.finders import (
+    ASK,
+    BAD_PROBABILITY,
+    CENSORED_ABOVE,
+    CENSORED_BELOW,
+    FAST_GUESS_ERROR,
+    FINDER_STATE,
+    GIVE_UP,
+    GO_SIDE_MAX_SIMULATIONS,
+    GUIDED_MAX_SIMULATIONS,
+    JUMP_SLOPE,
+    ROOT,
+    brent_start,
+    finder_point,
+    finder_reset,
+    finder_step,
+    go_side_start,
+    prior_bisection_start,
 )
 from skidmc.solver.model import (
     BASE_RESOLUTION,
@@ -105,8 +141,12 @@ from skidmc.solver.plan import (
     melt_width_for_rtol,
     modelled_error,
 )
-from skidmc.solver.roots import FAST_GUESS_ERROR
-from skidmc.solver.search import FADING_FAST_SHIFT, FADING_FAST_SPREAD, FAST_STOPS_SLIDING_SPREAD
+from skidmc.solver.search import (
+    COARSE_GAP,
+    FADING_FAST_SHIFT,
+    FADING_FAST_SPREAD,
+    FAST_STOPS_SLIDING_SPREAD,
+)
 from skidmc.solver.simulate import run_cap
 
 __all__ = [
@@ -115,7 +155,10 @@ __all__ = [
     "HANDBACK_REASONS",
     "HISTORY_SHAPE",
     "MAX_CELLS",
-    "MAX_SEARCH_EVALUATIONS",
+    "POINTS_SHAPE",
+    "PREFIX_SIZE",
+    "RESULT_SIZE",
+    "SEARCH_POINTS",
     "OUT_REASON",
     "OUT_SIZE",
     "STATUS_CPU",
@@ -150,14 +193,28 @@ DEVICE_HISTORY = 1536
 #: Shape of the history array of one thread (rows ``HISTORY_*`` of
 #: :mod:`skidmc.physics.records`).
 HISTORY_SHAPE = (HISTORY_ROWS, DEVICE_HISTORY + 1)
-#: Most simulations one search at one level may use before it gives up (to the CPU search).
-MAX_SEARCH_EVALUATIONS = 60
+#: Length of a thread's linear prefix (:class:`skidmc.solver.simulate.LinearPrefix`) at the
+#: finest mesh, :data:`MAX_CELLS` HE cells: 8.6 KB.
+PREFIX_SIZE = int(prefix_size.py_func(MAX_CELLS))
+#: Points one search at one level may hold (its simulations, and those of the search it
+#: tightens); a search that needs more goes to the CPU search. The CPU search's finders stop
+#: after 8 + 41 (go side, then guided), 40 + 41 (prior bisection, then guided) or 60 + 100
+#: (bracketing, then Brent) simulations; study scenes use 2-10 per search.
+SEARCH_POINTS = 128
+#: Shape of a search's points: rows ln H (as the CPU search's cache keys it), margin, and 1
+#: where the run stopped at the exit without an event (to be run again in full by Brent).
+POINTS_SHAPE = (3, SEARCH_POINTS)
+_P_X, _P_M, _P_SIGN_ONLY = 0, 1, 2
+#: Length of a search's result array (the ``_R_*`` layout).
+RESULT_SIZE = 8
+_R_X, _R_CENSOR, _R_HEIGHT, _R_N, _R_EVALUATIONS, _R_OK = 0, 1, 2, 3, 6, 7
 
 #: Result codes of :func:`critical_height_core` (``out[OUT_STATUS]``).
 STATUS_OK, STATUS_CPU = 0, 1
 #: Why a scene went to the CPU search (``out[OUT_REASON]``): an elastic target; melting with
 #: the ignition temperature below the melting point; a search that failed (integration failure,
-#: stall, no bracket within :data:`MAX_SEARCH_EVALUATIONS`, a refined root censored); a run
+#: stall, a finder that ends without a root, more points than :data:`SEARCH_POINTS`, a refined
+#: root censored); a run
 #: that outgrew :data:`DEVICE_HISTORY`; a narrower melting width; a level above
 #: :data:`DEVICE_MAX_LEVEL`.
 (HANDBACK_NONE, HANDBACK_ELASTIC, HANDBACK_IGNITION_BELOW_MELTING, HANDBACK_FAILED,
@@ -189,9 +246,11 @@ OUT_SIZE = 11
 # Scalars shared by every level of one scene (the `sc` array).
 # _S_MOST: the most step attempts of a run of the current search at its level (run_cap);
 # _S_HISTORY_FULL: 1 once a run outgrew the thread's flux history (DEVICE_HISTORY).
+# _S_PREFIX_H: the height [m] whose run recorded the search's linear prefix (0: none yet).
 (_S_OMEGA, _S_T_EXIT, _S_SLIDE_S, _S_SLIDE_C, _S_EXTENSION, _S_T_END, _S_FLUX,
- _S_LATENT, _S_RUNAWAY, _S_SPREAD, _S_MOST, _S_EFFUSIVITY, _S_HISTORY_FULL) = range(13)
-_N_SCALARS = 13
+ _S_LATENT, _S_RUNAWAY, _S_SPREAD, _S_MOST, _S_EFFUSIVITY, _S_HISTORY_FULL,
+ _S_PREFIX_H) = range(14)
+_N_SCALARS = 14
 
 
 @njit(cache=True)
@@ -216,23 +275,37 @@ def _build_level(row, sc, level, work, history):
 
 
 @njit(cache=True)
-def _margin(x, row, sc, n_cells, tol_temperature, melt_width, work, history, info):
-    """Margin ln(t_ev / t_exit) at H = exp(x) [1], capped at the horizon ln(t_end / t_exit)
-    (no event); NaN when the integration fails or stalls (:func:`run_cap`) or the run outgrows
-    ``history`` (the search then goes to the CPU). Updates ``sc[_S_MOST]``, the most attempts
-    of the search's runs.
+def _margin(x, row, sc, n_cells, tol_temperature, melt_width, until_exit, work, history, info,
+            prefix):
+    """Margin ln(t_ev / t_exit) at H = exp(x) [1] and whether the event came by the exit
+    (inf: no event within the horizon, or by the exit ``until_exit``); NaN when the
+    integration fails or stalls (:func:`run_cap`) or the run outgrows ``history`` (the search
+    then goes to the CPU). Updates ``sc[_S_MOST]``, the most attempts of the search's runs.
 
     The run is the CPU search's model of the same scene and level
     (:func:`skidmc.solver.model.build_model` with ``target="exact"``, the default search's)
-    run from t = 0: the same kernel on the same inputs, so the same margin to the last bit
-    (``tests/test_device.py``). ``info`` (shape (1,), dtype
-    :data:`skidmc.physics.records.KERNEL_RUN`) holds the run's input record, filled here, and
-    its outcome; ``work`` the mesh and the integrator's state (:data:`WORK_ROWS`); ``history``
-    the exact target's flux history (:data:`HISTORY_SHAPE`). No linear prefix, nothing
-    recorded.
+    run from t = 0: the same kernel on the same inputs, so the same margin to the last bit as
+    :func:`skidmc.solver.simulate.simulate` (``tests/test_device.py``), with ``until_exit`` as
+    there (a run that stops at the exit, its go runs at the commit temperature). ``info``
+    (shape (1,), dtype :data:`skidmc.physics.records.KERNEL_RUN`) holds the run's input record,
+    filled here, and its outcome; ``work`` the mesh and the integrator's state
+    (:data:`WORK_ROWS`); ``history`` the exact target's flux history (:data:`HISTORY_SHAPE`).
+    ``prefix`` (length :data:`PREFIX_SIZE`; empty: none) is the search's linear prefix, used as
+    the CPU search's :class:`skidmc.solver.simulate.LinearPrefix`: the search's first run
+    records it, later runs within its scale resume from it (``sc[_S_PREFIX_H]``: the height that
+    recorded it, 0 before). Nothing recorded.
     """
     cap = run_cap(tol_temperature, sc[_S_MOST])
-    q0 = sc[_S_FLUX] * math.sqrt(math.exp(x))
+    height = math.exp(x)
+    q0 = sc[_S_FLUX] * math.sqrt(height)
+    mode = 0
+    if prefix.shape[0] > 0:
+        if sc[_S_PREFIX_H] == 0.0:
+            mode = PREFIX_WRITE
+        else:
+            scale = math.sqrt(height / sc[_S_PREFIX_H])
+            if 1.0 / PREFIX_MAX_SCALE <= scale <= PREFIX_MAX_SCALE:
+                mode = PREFIX_RESUME
     run = info[0]
     inp = run.input
     inp.n = n_cells
@@ -253,7 +326,7 @@ def _margin(x, row, sc, n_cells, tol_temperature, melt_width, work, history, inf
     inp.t_exit = sc[_S_T_EXIT]
     inp.q_ext = q0 * sc[_S_EXTENSION]
     inp.t_end = sc[_S_T_END]
-    inp.t_stop = sc[_S_T_END]
+    inp.t_stop = min(sc[_S_T_EXIT], sc[_S_T_END]) if until_exit else sc[_S_T_END]
     inp.initial_temperature = row[_T0]
     inp.tol_temperature = tol_temperature
     inp.dt_initial = 1e-6 * sc[_S_T_EXIT]
@@ -262,179 +335,257 @@ def _margin(x, row, sc, n_cells, tol_temperature, melt_width, work, history, inf
     inp.n_record = 0
     inp.target_effusivity = sc[_S_EFFUSIVITY]
     inp.he_conductivity = row[_HE_K]
-    inp.sign_commit_fraction = 0.0
-    inp.prefix_mode = 0
+    inp.sign_commit_fraction = SIGN_COMMIT_FRACTION if until_exit else 0.0
+    inp.prefix_mode = mode
     inp.n_table = 0
     res = run.output
     simulate_core(inp, res, work[_ROW_WIDTH], work[_ROW_RHO_C], work[_ROW_FACE], work, history,
-                  work[0], work[0], work[0], work[0])
-    horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
+                  work[0], work[0], prefix, work[0])
+    if mode == PREFIX_WRITE and prefix[_PX_VALID] == 1.0:
+        sc[_S_PREFIX_H] = height
     attempts = res.steps + res.rejected
     sc[_S_MOST] = max(sc[_S_MOST], attempts)
     if res.history_full:
         sc[_S_HISTORY_FULL] = 1.0
-        return math.nan
+        return math.nan, False
     if res.failed or (attempts >= cap and not res.event):
-        return math.nan
+        return math.nan, False
     t_ev = res.t_event
     if not (t_ev < math.inf):
-        return horizon
-    return min(math.log(t_ev / sc[_S_T_EXIT]), horizon)
+        return math.inf, False
+    return math.log(t_ev / sc[_S_T_EXIT]), res.event and t_ev <= sc[_S_T_EXIT]
 
 
 @njit(cache=True)
-def _brent(lo, f_lo, hi, f_hi, x_tol, row, sc, n_cells, tol_temperature, melt_width, work,
-           history, info, budget):
-    """Brent's zeroin on a bracket f(lo) > 0 >= f(hi) until it is ``x_tol`` wide.
+def _find(pts, n, x):
+    """Index of the point at exactly ``x`` among the first ``n`` of ``pts``, or -1."""
+    for i in range(n):
+        if pts[_P_X, i] == x:
+            return i
+    return -1
 
-    Returns (lo, f_lo, hi, f_hi, evaluations, ok): the final bracket (no-go end ``lo``, go end
-    ``hi``), at most 2 ``x_tol`` wide, so its midpoint is within ``x_tol`` of the root.
+
+@njit(cache=True)
+def _drive(code, value, signs_only, row, sc, n_cells, tol_temperature, melt_width, pts, n,
+           work, history, info, prefix, st, fpts):
+    """Answer the finder's questions (:mod:`skidmc.solver.finders`) with the search's runs,
+    each height simulated once (``pts``: the search's points, its first ``n`` known).
+
+    As the CPU search's margin: with ``signs_only`` a run stops at the exit, and one without
+    an event by then is marked (row ``_P_SIGN_ONLY``) to be run again in full if Brent's method
+    needs it. Returns the finder's last (code, value), the points now held, and False when a
+    run failed or the points overflow ``pts`` (the search then goes to the CPU).
     """
-    a, fa, b, fb = lo, f_lo, hi, f_hi
-    c, fc = a, fa
-    d = b - a
-    e = d
-    evaluations = 0
-    while True:
-        if abs(fc) < abs(fb):
-            a, fa = b, fb
-            b, fb = c, fc
-            c, fc = a, fa
-        # Converged when the bracket |c - b| is at most 2 x_tol: its midpoint is then within
-        # x_tol of every root inside it.
-        tol1 = 2.0 * 2.2e-16 * abs(b) + x_tol
-        m = 0.5 * (c - b)
-        if abs(m) <= tol1 or fb == 0.0:
+    while code == ASK:
+        i = _find(pts, n, value)
+        if i >= 0:
+            m = pts[_P_M, i]
+        else:
+            if n >= pts.shape[1]:
+                return code, value, n, False
+            m, event = _margin(value, row, sc, n_cells, tol_temperature, melt_width, signs_only,
+                               work, history, info, prefix)
+            if m != m:
+                return code, value, n, False
+            pts[_P_X, n], pts[_P_M, n] = value, m
+            pts[_P_SIGN_ONLY, n] = 1.0 if signs_only and not event else 0.0
+            n += 1
+        code, value = finder_step(st, fpts, m)
+    return code, value, n, True
+
+
+@njit(cache=True)
+def _history_slopes(pts, n, order):
+    """The CPU search's :func:`~skidmc.solver.roots.margin_slope` and
+    :func:`~skidmc.solver.roots.go_side_slope` of a finished search [1] (NaN for None), on its
+    history as the CPU search keeps it: (exp(x), m) sorted, x read back as ln H."""
+    for i in range(n):
+        order[i] = i
+    for i in range(1, n):   # insertion sort by (exp(x), m)
+        k = order[i]
+        h, m = math.exp(pts[_P_X, k]), pts[_P_M, k]
+        j = i - 1
+        while j >= 0:
+            hj, mj = math.exp(pts[_P_X, order[j]]), pts[_P_M, order[j]]
+            if hj > h or (hj == h and mj > m):
+                order[j + 1] = order[j]
+                j -= 1
+            else:
+                break
+        order[j + 1] = k
+    slope = math.nan
+    x0, m0, have = 0.0, 0.0, False
+    for i in range(n):
+        k = order[i]
+        m1 = pts[_P_M, k]
+        if m1 != m1:
+            continue
+        x1 = math.log(math.exp(pts[_P_X, k]))
+        if have and m0 > 0.0 >= m1 and x1 > x0:
+            slope = -math.inf if m0 == math.inf else (m1 - m0) / (x1 - x0)
             break
-        if evaluations >= budget:
-            return lo, f_lo, hi, f_hi, evaluations, False
-        if abs(e) >= tol1 and abs(fa) > abs(fb):
-            s = fb / fa
-            if a == c:
-                p = 2.0 * m * s
-                q = 1.0 - s
+        x0, m0, have = x1, m1, True
+    go_slope = math.nan
+    found = 0
+    xa, ma = 0.0, 0.0
+    for i in range(n):
+        k = order[i]
+        m1 = pts[_P_M, k]
+        if math.isfinite(m1) and m1 <= 0.0:
+            x1 = math.log(math.exp(pts[_P_X, k]))
+            if found == 0:
+                xa, ma, found = x1, m1, 1
             else:
-                q = fa / fc
-                r = fb / fc
-                p = s * (2.0 * m * q * (q - r) - (b - a) * (r - 1.0))
-                q = (q - 1.0) * (r - 1.0) * (s - 1.0)
-            if p > 0.0:
-                q = -q
-            else:
-                p = -p
-            if 2.0 * p < min(3.0 * m * q - abs(tol1 * q), abs(e * q)):
-                e = d
-                d = p / q
-            else:
-                d = m
-                e = m
-        else:
-            d = m
-            e = m
-        a, fa = b, fb
-        if abs(d) > tol1:
-            b += d
-        else:
-            b += tol1 if m > 0.0 else -tol1
-        fb = _margin(b, row, sc, n_cells, tol_temperature, melt_width, work, history, info)
-        evaluations += 1
-        if fb != fb:
-            return lo, f_lo, hi, f_hi, evaluations, False
-        if (fb > 0.0) == (fc > 0.0):
-            c, fc = a, fa
-            d = b - a
-            e = d
-    # The bracket is b and c: order it as (no-go, go).
-    if fb > 0.0:
-        return b, fb, c, fc, evaluations, True
-    return c, fc, b, fb, evaluations, True
+                s = (m1 - ma) / (x1 - xa)
+                if s < 0.0:
+                    go_slope = s
+                break
+    return slope, go_slope
 
 
 @njit(cache=True)
-def _search(row, sc, level, melt_width, x_guess, step, x_tol, x_min, x_max, work, history,
-            info, res):
-    """One search at ``level``: bracket the root around ``x_guess`` (first step ``step``,
-    doubling), then Brent to ``x_tol``. Writes ``res`` = (x_root, censor, lo, f_lo, hi, f_hi,
-    evaluations, ok).
+def _or_default(value, default):
+    """Python's ``value or default`` for an optional float (NaN: None)."""
+    return default if value != value or value == 0.0 else value
 
-    A first step sized from the first margin and the margin's slope was tried: on the report
-    presets it saved nothing and cost the stops-sliding scene (gold) 6 more simulations.
+
+@njit(cache=True)
+def _level_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max, h_fast,
+                  h_guess, overshoot, slope, go_slope, guess_sigma, res, pts, n_known, work,
+                  history, info, prefix, st, fpts, order):
+    """One search at ``level``: the CPU search's :func:`skidmc.solver.search._search` step for
+    step, with the same finders (:mod:`skidmc.solver.finders`). Writes ``res`` (``_R_*``) and
+    the search's points (``pts``, its first ``n_known`` carried over from the search it
+    tightens, as ln of the heights the CPU search keeps).
+
+    Without a guess (NaN), a level at or above :data:`~skidmc.solver.search.COARSE_GAP` starts
+    from the root two levels down (that search's points are then dropped: the CPU search keeps
+    them in a search of its own), a lower one from the fast tier's height ``h_fast`` (NaN:
+    none). From a guess, a rebound's root is extrapolated along the go side; where sliding
+    stops, the margin jumped at the guess's root (``slope`` steeper than
+    :data:`~skidmc.solver.finders.JUMP_SLOPE`) or the heating fades, the root's prior is
+    bisected, with runs that stop at the exit. Otherwise, or when the guided finder gives up,
+    bracketing and Brent's method. ``overshoot``, ``slope``, ``go_slope``, ``guess_sigma``: as
+    there, NaN for None.
     """
-    n_cells, tol_temperature = _build_level(row, sc, level, work, history)
-    sc[_S_MOST] = 0.0   # the stall cap counts this search's runs (run_cap)
-    x0 = min(max(x_guess, x_min), x_max)
-    f0 = _margin(x0, row, sc, n_cells, tol_temperature, melt_width, work, history, info)
-    evaluations = 1
-    res[1] = CENSOR_NONE
-    res[7] = 0.0
-    if f0 != f0:
-        res[6] = evaluations
-        return
-    step = max(step, 2.0 * x_tol)
-    lo = hi = x0
-    f_lo = f_hi = f0
-    while True:
-        if evaluations >= MAX_SEARCH_EVALUATIONS:
-            res[6] = evaluations
+    evaluations = 0
+    if h_guess != h_guess and level >= COARSE_GAP:
+        # Two levels down (below COARSE_GAP on the device: DEVICE_MAX_LEVEL < 2 COARSE_GAP),
+        # from the fast tier's height.
+        gap = level - COARSE_GAP
+        _one_search(row, sc, regime, gap, melt_width, max(x_tol, 0.2 * modelled_error(gap)),
+                    x_min, x_max, h_min, h_max, h_fast, math.nan, math.nan, math.nan, math.nan,
+                    math.nan, res, pts, 0, work, history, info, prefix, st, fpts)
+        evaluations = int(res[_R_EVALUATIONS])
+        if res[_R_OK] == 0.0:
             return
-        if f_hi <= 0.0 and f_lo <= 0.0:   # go everywhere so far: look lower
-            if lo <= x_min:
-                res[0], res[1], res[6], res[7] = x_min, CENSOR_BELOW, evaluations, 1.0
-                return
-            x = max(lo - step, x_min)
-            fx = _margin(x, row, sc, n_cells, tol_temperature, melt_width, work, history, info)
-            evaluations += 1
-            if fx != fx:
-                res[6] = evaluations
-                return
-            if fx > 0.0:
-                f_hi = f_lo
-                hi = lo
-                lo, f_lo = x, fx
-                break
-            lo, f_lo = x, fx
-            hi, f_hi = x, fx
-        else:                              # no-go so far: look higher
-            if hi >= x_max:
-                res[0], res[1], res[6], res[7] = x_max, CENSOR_ABOVE, evaluations, 1.0
-                return
-            x = min(hi + step, x_max)
-            fx = _margin(x, row, sc, n_cells, tol_temperature, melt_width, work, history, info)
-            evaluations += 1
-            if fx != fx:
-                res[6] = evaluations
-                return
-            if fx <= 0.0:
-                lo, f_lo = hi, f_hi
-                hi, f_hi = x, fx
-                break
-            lo, f_lo = x, fx
-            hi, f_hi = x, fx
-        step *= 2.0
-    lo, f_lo, hi, f_hi, n, ok = _brent(lo, f_lo, hi, f_hi, x_tol, row, sc, n_cells,
-                                        tol_temperature, melt_width, work, history, info,
-                                        MAX_SEARCH_EVALUATIONS - evaluations)
-    res[0] = 0.5 * (lo + hi)
-    res[2], res[3], res[4], res[5] = lo, f_lo, hi, f_hi
-    res[6] = evaluations + n
-    res[7] = 1.0 if ok else 0.0
+        h_fast = math.nan   # the CPU search takes no fast guess after the coarse start
+        if res[_R_CENSOR] == CENSOR_NONE:
+            h_guess = res[_R_HEIGHT]
+            slope, go_slope = _history_slopes(pts, int(res[_R_N]), order)
+            overshoot = 2.0 * modelled_error(gap)
+        n_known = 0
+    _one_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max, h_fast,
+                h_guess, overshoot, slope, go_slope, guess_sigma, res, pts, n_known, work,
+                history, info, prefix, st, fpts)
+    res[_R_EVALUATIONS] += evaluations
 
 
 @njit(cache=True)
-def _tighten(row, sc, level, melt_width, x_tol, work, history, info, res):
-    """Continue a search's Brent iteration from its final bracket to the tighter ``x_tol``;
-    adds its simulations to ``res[6]``."""
-    if res[1] != CENSOR_NONE:
-        return
+def _one_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max, h_fast,
+                h_guess, overshoot, slope, go_slope, guess_sigma, res, pts, n_known, work,
+                history, info, prefix, st, fpts):
+    """:func:`_level_search` at ``level`` itself (no coarse start)."""
+    res[_R_OK] = 0.0
+    from_fast = False
+    if h_guess != h_guess and h_fast == h_fast:
+        h_guess, overshoot, from_fast = h_fast, FAST_GUESS_ERROR, True
+    for i in range(n_known):
+        pts[_P_SIGN_ONLY, i] = 0.0   # stopped at the exit in an earlier search: kept as known
     n_cells, tol_temperature = _build_level(row, sc, level, work, history)
-    sc[_S_MOST] = 0.0   # a new search at the tighter tolerance, as the CPU search's _tighten
-    lo, f_lo, hi, f_hi, n, ok = _brent(res[2], res[3], res[4], res[5], x_tol, row, sc, n_cells,
-                                       tol_temperature, melt_width, work, history, info,
-                                       MAX_SEARCH_EVALUATIONS)
-    res[0] = 0.5 * (lo + hi)
-    res[2], res[3], res[4], res[5] = lo, f_lo, hi, f_hi
-    res[6] += n
-    res[7] = 1.0 if ok else 0.0
+    sc[_S_MOST] = 0.0      # the stall cap counts this search's runs (run_cap)
+    sc[_S_PREFIX_H] = 0.0  # and its first run records its linear prefix
+    has_guess = h_guess == h_guess
+    jumped = slope < -JUMP_SLOPE
+    fading = from_fast and regime == REGIME_FADING
+    signs_only = has_guess and (regime == REGIME_STOPS_SLIDING or jumped or fading)
+    finder_reset(st)
+    code, value = GIVE_UP, math.nan
+    if has_guess and regime != REGIME_STOPS_SLIDING and not (jumped or fading):
+        for i in range(n_known):
+            if math.isfinite(pts[_P_M, i]):
+                finder_point(st, fpts, pts[_P_X, i], pts[_P_M, i])
+        code, value = go_side_start(st, fpts, math.log(h_guess), go_slope, x_tol, x_min, x_max,
+                                    _or_default(overshoot, FAST_GUESS_ERROR),
+                                    GO_SIDE_MAX_SIMULATIONS)
+    elif has_guess:
+        if fading:
+            center, sigma = math.log(h_guess) + FADING_FAST_SHIFT, FADING_FAST_SPREAD
+        elif from_fast:
+            center, sigma = math.log(h_guess), FAST_STOPS_SLIDING_SPREAD
+        else:
+            spread = 0.5 * _or_default(overshoot, FAST_GUESS_ERROR)
+            center, sigma = math.log(h_guess) + spread, _or_default(guess_sigma, spread / 3.0)
+        for i in range(n_known):
+            m = pts[_P_M, i]
+            if math.isfinite(m) or (signs_only and m == math.inf):
+                finder_point(st, fpts, pts[_P_X, i], m)
+        code, value = prior_bisection_start(st, fpts, center, sigma, x_tol, x_min, x_max,
+                                            GUIDED_MAX_SIMULATIONS, slope, signs_only)
+    n = n_known
+    code, value, n, ok = _drive(code, value, signs_only, row, sc, n_cells, tol_temperature,
+                                melt_width, pts, n, work, history, info, prefix, st, fpts)
+    if ok and code == BAD_PROBABILITY:
+        ok = False
+    if ok and code != ROOT:
+        # Brent's bracketing steps by the margin's value: the runs stopped at the exit are
+        # dropped, to be run again in full where it needs them.
+        kept = 0
+        for i in range(n):
+            if pts[_P_SIGN_ONLY, i] == 0.0:
+                pts[_P_X, kept], pts[_P_M, kept] = pts[_P_X, i], pts[_P_M, i]
+                pts[_P_SIGN_ONLY, kept] = 0.0
+                kept += 1
+        n = kept
+        finder_reset(st)
+        x0 = math.log(h_guess) if has_guess and h_guess != 0.0 else 0.0   # 1 m by default
+        horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
+        code, value = brent_start(st, x0, x_min, x_max, x_tol, horizon,
+                                  _or_default(overshoot, 0.05))
+        code, value, n, ok = _drive(code, value, False, row, sc, n_cells, tol_temperature,
+                                    melt_width, pts, n, work, history, info, prefix, st, fpts)
+    res[_R_N] = n
+    res[_R_EVALUATIONS] = n - n_known
+    if not ok:
+        return
+    if code == ROOT:
+        res[_R_X], res[_R_CENSOR], res[_R_HEIGHT] = value, CENSOR_NONE, math.exp(value)
+    elif code == CENSORED_ABOVE:
+        res[_R_X], res[_R_CENSOR], res[_R_HEIGHT] = x_max, CENSOR_ABOVE, h_max
+    elif code == CENSORED_BELOW:
+        res[_R_X], res[_R_CENSOR], res[_R_HEIGHT] = x_min, CENSOR_BELOW, h_min
+    else:
+        return   # no bracket, no convergence: the CPU search raises; hand the scene back
+    res[_R_OK] = 1.0
+
+
+@njit(cache=True)
+def _tighten(row, sc, regime, level, melt_width, old_tol, x_tol, x_min, x_max, h_min, h_max,
+             res, pts, work, history, info, prefix, st, fpts, order):
+    """The CPU search's ``_tighten``: the search again at the tighter ``x_tol`` from its own
+    root, slopes and simulations (no height simulated twice); adds its simulations to
+    ``res``'s. A censored search stays as it is."""
+    if res[_R_CENSOR] != CENSOR_NONE:
+        return
+    n = int(res[_R_N])
+    slope, go_slope = _history_slopes(pts, n, order)
+    for i in range(n):   # the CPU search's history holds heights: ln of them
+        pts[_P_X, i] = math.log(math.exp(pts[_P_X, i]))
+    before = res[_R_EVALUATIONS]
+    _level_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max,
+                  math.nan, res[_R_HEIGHT], old_tol, slope, go_slope, math.nan, res, pts, n,
+                  work, history, info, prefix, st, fpts, order)
+    res[_R_EVALUATIONS] += before
 
 
 @njit(cache=True)
@@ -476,6 +627,7 @@ def _fill_scalars(row, pressure, omega, t_exit, slide_s, slide_c, latent, runawa
     sc[_S_EFFUSIVITY] = math.sqrt(row[_TG_K] * row[_TG_RHO] * row[_TG_C])
     sc[_S_MOST] = 0.0
     sc[_S_HISTORY_FULL] = 0.0
+    sc[_S_PREFIX_H] = 0.0
 
 
 @njit(cache=True)
@@ -489,8 +641,8 @@ def _modelled_latent(row, melting, t_run):
 
 
 @njit(cache=True)
-def _one_margin(row, x, level, melt_width, melt_spread, melting, runaway_fraction, work,
-                history, sc, info):
+def _one_margin(row, x, level, melt_width, melt_spread, melting, runaway_fraction, until_exit,
+                work, history, sc, info, prefix):
     """:func:`device_margin`'s compiled part."""
     pressure = contact_pressure(row[_SIGMA], row[_TG_P])
     omega, _, t_exit, _, slide_s, slide_c = impact_constants(
@@ -501,33 +653,38 @@ def _one_margin(row, x, level, melt_width, melt_spread, melting, runaway_fractio
     _fill_scalars(row, pressure, omega, t_exit, slide_s, slide_c, latent, runaway_fraction,
                   melt_spread, sc)
     n_cells, tol_temperature = _build_level(row, sc, level, work, history)
-    return _margin(x, row, sc, n_cells, tol_temperature, melt_width, work, history, info)
+    return _margin(x, row, sc, n_cells, tol_temperature, melt_width, until_exit, work, history,
+                   info, prefix)[0]
 
 
-def device_margin(row, x, level, melt_width, melt_spread, melting=True, runaway_fraction=None):
+def device_margin(row, x, level, melt_width, melt_spread, melting=True, runaway_fraction=None,
+                  until_exit=False):
     """The margin ln(t_ev / t_exit) [1] one device run computes at H = exp(``x``) [m].
 
     A diagnostic of what a thread runs: the scene ``row`` (:data:`skidmc.solver.fast.SCENE_FIELDS`
     order, SI) at ``level`` with melting width ``melt_width`` [K] and spread ``melt_spread`` [1],
-    the search's first run (its stall cap :func:`run_cap` with no earlier runs); the horizon's
-    margin without an event, NaN where the run fails, stalls or outgrows the thread's history.
-    Equal to the last bit to :func:`skidmc.solver.simulate.simulate` at ``math.exp(x)`` (the
-    height the CPU search simulates for its ``x``) of the CPU search's model
-    (``build_model(scene, level=level, target="exact", ...)``) without a linear prefix, capped
-    at the same horizon (``tests/test_device.py``).
+    the search's first run (its stall cap :func:`run_cap` with no earlier runs); inf without an
+    event, NaN where the run fails, stalls or outgrows the thread's history. Equal to the last
+    bit to :func:`skidmc.solver.simulate.simulate` at ``math.exp(x)`` (the height the CPU search
+    simulates for its ``x``) of the CPU search's model
+    (``build_model(scene, level=level, target="exact", ...)``) without a linear prefix, with
+    the same ``until_exit`` (``tests/test_device.py``).
     """
     from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION
 
     runaway = DEFAULT_RUNAWAY_FRACTION if runaway_fraction is None else float(runaway_fraction)
     return float(_one_margin(np.ascontiguousarray(row, dtype=np.float64), float(x),
                              float(level), float(melt_width), float(melt_spread), bool(melting),
-                             runaway, np.empty((WORK_ROWS, MAX_CELLS)), np.empty(HISTORY_SHAPE),
-                             np.empty(_N_SCALARS), np.empty(1, dtype=KERNEL_RUN)))
+                             runaway, bool(until_exit), np.empty((WORK_ROWS, MAX_CELLS)),
+                             np.empty(HISTORY_SHAPE),
+                             np.empty(_N_SCALARS), np.empty(1, dtype=KERNEL_RUN),
+                             np.empty(0)))
 
 
 @njit(cache=True)
 def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_fraction,
-                         table, gl_x, gl_w, work, history, fast_work, info, coarse, fine, out):
+                         table, gl_x, gl_w, work, history, fast_work, info, prefix, coarse,
+                         fine, coarse_pts, fine_pts, st, fpts, order, out):
     """The default full-tier search of one scene (module docstring); results in ``out``.
 
     Parameters
@@ -553,8 +710,18 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     fast_work : ndarray, shape (3, >= N_TIMES)
     info : ndarray, shape (1,), dtype :data:`skidmc.physics.records.KERNEL_RUN`
         The record of the search's current run (:func:`_margin`).
-    coarse, fine : ndarray, shape (8,)
-        Scratch for the two searches of the pair.
+    prefix : ndarray, shape (PREFIX_SIZE,)
+        The current search's linear prefix (:func:`_margin`).
+    coarse, fine : ndarray, shape (RESULT_SIZE,)
+        The two searches of the pair (the ``_R_*`` layout).
+    coarse_pts, fine_pts : ndarray, shape POINTS_SHAPE
+        Their points (each search's simulations).
+    st : ndarray, shape (1,), dtype :data:`skidmc.solver.finders.FINDER_STATE`
+        The root finder's state.
+    fpts : ndarray, shape (2, SEARCH_POINTS)
+        The root finder's go points.
+    order : ndarray of int64, shape (SEARCH_POINTS,)
+        Scratch for sorting a search's points.
     out : ndarray, shape (OUT_SIZE,)
         Written (see the ``OUT_*`` layout).
     """
@@ -599,59 +766,50 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
         return
 
     # First guess: the fast tier's height (its scratch rows 0-2 are free until `sc` is set),
-    # with the CPU search's prior about it: where sliding stops the fast tier's measured
-    # scatter, where the heating fades its measured shift and scatter.
+    # as the CPU search's _fast_guess takes it (the HE's heat of fusion unless melting is off).
+    fusion = row[_HE_L] if melting else 0.0
     h_fast, censor_fast, _, _, _ = fast_height_core(
         mu, row[_SIGMA], row[_MASS], row[_DIAMETER], row[_ANGLE], row[_TILT], row[_T0],
-        row[_HE_RHO], row[_HE_C], row[_HE_K], latent, row[_HE_TM], row[_Z], row[_TA], row[_Q],
-        row[_TG_RHO], row[_TG_C], row[_TG_K], row[_TG_P], h_min, h_max, C_IGNITION, MELT_FACTOR,
-        STOPS_SLIDING_FACTOR, table,
+        row[_HE_RHO], row[_HE_C], row[_HE_K], fusion, row[_HE_TM],
+        row[_Z], row[_TA], row[_Q], row[_TG_RHO], row[_TG_C], row[_TG_K], row[_TG_P], h_min,
+        h_max, C_IGNITION, MELT_FACTOR, STOPS_SLIDING_FACTOR, table,
         gl_x, gl_w, N_TIMES, fast_work[0], fast_work[1], fast_work[2])
-    if censor_fast == CENSOR_NONE and h_fast > 0.0:
-        x_guess, guess_error = math.log(h_fast), FAST_GUESS_ERROR
-        if regime == REGIME_STOPS_SLIDING:
-            guess_error = FAST_STOPS_SLIDING_SPREAD
-        elif regime == REGIME_FADING:
-            x_guess, guess_error = x_guess + FADING_FAST_SHIFT, FADING_FAST_SPREAD
-    else:
-        x_guess, guess_error = 0.0, 1.0   # 1 m, and a first step of a factor e
+    if not (censor_fast == CENSOR_NONE and 0.0 < h_fast < math.inf):
+        h_fast = math.nan
 
     _fill_scalars(row, pressure, omega, t_exit, slide_s, slide_c, latent, runaway_fraction,
                   melt_spread, sc)
 
     coarse_level, fine_level = level - 1.0, level
-    _search(row, sc, coarse_level, melt_width, x_guess, guess_error, coarse_tol,
-            x_min, x_max, work, history, info, coarse)
-    evaluations = coarse[6]
-    if coarse[7] == 0.0:
+    _level_search(row, sc, regime, coarse_level, melt_width, coarse_tol, x_min, x_max, h_min,
+                  h_max, h_fast, math.nan, math.nan, math.nan, math.nan, math.nan, coarse,
+                  coarse_pts, 0, work, history, info, prefix, st, fpts, order)
+    evaluations = coarse[_R_EVALUATIONS]
+    if coarse[_R_OK] == 0.0:
         _hand_back(out, _search_failed(sc), evaluations)
         return
-    # The fine root lies above the coarse one by a measured fraction of the coarse level's
-    # modelled error (skidmc.solver.plan: EXACT_FINE_SHIFT with its spread where the root is
-    # located by signs; on steady rebounds 0.30-0.39 of it, EXACT_STEADY_FINE_OVERSHOOT its
-    # 90th percentile, so the bracket from there down half as far holds the medians).
+    # The fine search (the CPU search's _fine_search): from the coarse root, the fine root's
+    # measured place above it (skidmc.solver.plan: EXACT_FINE_SHIFT with its spread where the
+    # root is located by signs, EXACT_STEADY_FINE_OVERSHOOT on steady rebounds), the coarse
+    # search's slopes.
     coarse_error = modelled_error(coarse_level)
-    if coarse[1] != CENSOR_NONE:
-        start, step = x_guess, coarse_error
-    elif signs:
-        start = coarse[0] + EXACT_FINE_SHIFT * coarse_error
-        step = EXACT_FINE_SHIFT_SPREAD * coarse_error + 0.5 * coarse_tol
-    else:
-        start = coarse[0] + EXACT_STEADY_FINE_OVERSHOOT * coarse_error
-        step = 0.5 * EXACT_STEADY_FINE_OVERSHOOT * coarse_error
-    _search(row, sc, fine_level, melt_width, start, step, fine_tol,
-            x_min, x_max, work, history, info, fine)
-    evaluations += fine[6]
-    if fine[7] == 0.0:
+    overshoot = (2.0 * EXACT_FINE_SHIFT if signs else EXACT_STEADY_FINE_OVERSHOOT) * coarse_error
+    slope, go_slope = _history_slopes(coarse_pts, int(coarse[_R_N]), order)
+    h_guess = coarse[_R_HEIGHT] if coarse[_R_CENSOR] == CENSOR_NONE else math.nan
+    _level_search(row, sc, regime, fine_level, melt_width, fine_tol, x_min, x_max, h_min, h_max,
+                  h_fast, h_guess, overshoot, slope, go_slope,
+                  EXACT_FINE_SHIFT_SPREAD * coarse_error + 0.5 * coarse_tol, fine, fine_pts, 0,
+                  work, history, info, prefix, st, fpts, order)
+    evaluations += fine[_R_EVALUATIONS]
+    if fine[_R_OK] == 0.0:
         _hand_back(out, _search_failed(sc), evaluations)
         return
     melt_bias = MELT_WIDTH_BIAS_PER_K * melt_width if melting_term else 0.0
-    if coarse[1] != CENSOR_NONE or fine[1] != CENSOR_NONE:
+    if coarse[_R_CENSOR] != CENSOR_NONE or fine[_R_CENSOR] != CENSOR_NONE:
         # As the CPU search: the fine search's result (its bound when censored, else its
         # own root, not extrapolated) with the calibrated estimate of its level.
-        out[OUT_CENSOR] = fine[1]
-        out[OUT_HEIGHT] = (h_max if fine[1] == CENSOR_ABOVE else
-                           h_min if fine[1] == CENSOR_BELOW else math.exp(fine[0]))
+        out[OUT_CENSOR] = fine[_R_CENSOR]
+        out[OUT_HEIGHT] = fine[_R_HEIGHT]
         width_bias = (melt_bias if melt_width > melt_width_floor(fine_level) * (1.0 + 1e-9)
                       else 0.0)
         out[OUT_ERROR] = modelled_error(fine_level) + fine_tol + width_bias
@@ -661,7 +819,7 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     # The adaptive rounds: the CPU search's rule (skidmc.solver.controller), on the exact
     # target with the width never narrowed here.
     for round_ in range(MAX_ADAPTIVE_ROUNDS + 1):
-        height, relative = richardson_value(math.exp(coarse[0]), math.exp(fine[0]))
+        height, relative = richardson_value(coarse[_R_HEIGHT], fine[_R_HEIGHT])
         pair, estimate = pair_estimate(relative, coarse_level, melt_spread, True, signs,
                                        melt_bias, coarse_tol, fine_tol)
         if round_ == MAX_ADAPTIVE_ROUNDS:
@@ -672,14 +830,18 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
         if action == DONE:
             break
         if action == TIGHTEN_FINE or action == TIGHTEN_BOTH:
-            # Tighten the roots from their brackets.
-            before = coarse[6] + fine[6]
+            # Tighten the roots, each from its own root, slopes and simulations.
+            before = coarse[_R_EVALUATIONS] + fine[_R_EVALUATIONS]
             if action == TIGHTEN_BOTH:
-                _tighten(row, sc, coarse_level, melt_width, next_coarse_tol, work, history,
-                         info, coarse)
-            _tighten(row, sc, fine_level, melt_width, next_fine_tol, work, history, info, fine)
-            evaluations += coarse[6] + fine[6] - before
-            if coarse[7] == 0.0 or fine[7] == 0.0:
+                _tighten(row, sc, regime, coarse_level, melt_width, coarse_tol, next_coarse_tol,
+                         x_min, x_max, h_min, h_max, coarse, coarse_pts, work, history, info,
+                         prefix, st, fpts, order)
+            if coarse[_R_OK] == 1.0:
+                _tighten(row, sc, regime, fine_level, melt_width, fine_tol, next_fine_tol, x_min,
+                         x_max, h_min, h_max, fine, fine_pts, work, history, info, prefix, st, fpts,
+                         order)
+            evaluations += coarse[_R_EVALUATIONS] + fine[_R_EVALUATIONS] - before
+            if coarse[_R_OK] == 0.0 or fine[_R_OK] == 0.0:
                 _hand_back(out, _search_failed(sc), evaluations)
                 return
         elif action == NARROW:
@@ -692,15 +854,21 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
             _hand_back(out, HANDBACK_LEVEL, evaluations)
             return
         elif action == REFINE:
-            # The next level's root predicted from this pair (value [m]); the pair moves up.
-            for k in range(8):
+            # The next level's root predicted from this pair (value [m]); the pair moves up,
+            # the new fine search starting from there with the old fine search's slopes.
+            for k in range(RESULT_SIZE):
                 coarse[k] = fine[k]
-            _search(row, sc, fine_level + 1.0, melt_width, math.log(value),
-                    0.5 * abs(relative) + next_fine_tol, next_fine_tol, x_min, x_max, work,
-                    history, info, fine)
-            evaluations += fine[6]
+            for k in range(int(fine[_R_N])):
+                for r in range(POINTS_SHAPE[0]):
+                    coarse_pts[r, k] = fine_pts[r, k]
+            slope, go_slope = _history_slopes(coarse_pts, int(coarse[_R_N]), order)
+            _level_search(row, sc, regime, fine_level + 1.0, melt_width, next_fine_tol, x_min,
+                          x_max, h_min, h_max, h_fast, value,
+                          0.5 * abs(relative) + next_fine_tol, slope, go_slope, math.nan, fine,
+                          fine_pts, 0, work, history, info, prefix, st, fpts, order)
+            evaluations += fine[_R_EVALUATIONS]
             coarse_level, fine_level = fine_level, fine_level + 1.0
-            if fine[7] == 0.0 or fine[1] != CENSOR_NONE:
+            if fine[_R_OK] == 0.0 or fine[_R_CENSOR] != CENSOR_NONE:
                 _hand_back(out, _search_failed(sc), evaluations)
                 return
         else:   # STOP
@@ -731,8 +899,15 @@ def critical_heights_cpu(rows, rtol, h_min, h_max, melt_spread, melting, runaway
         history = np.empty(HISTORY_SHAPE)
         fast_work = np.empty((3, N_TIMES))
         info = np.empty(1, dtype=KERNEL_RUN)   # every field written before it is read
-        coarse = np.empty(8)
-        fine = np.empty(8)
+        prefix = np.empty(PREFIX_SIZE)         # written by each search's first run
+        coarse = np.empty(RESULT_SIZE)
+        fine = np.empty(RESULT_SIZE)
+        coarse_pts = np.empty(POINTS_SHAPE)
+        fine_pts = np.empty(POINTS_SHAPE)
+        st = np.empty(1, dtype=FINDER_STATE)   # finder_reset before every use
+        fpts = np.empty((2, SEARCH_POINTS))
+        order = np.empty(SEARCH_POINTS, dtype=np.int64)
         critical_height_core(rows[i], rtol, h_min, h_max, melt_spread, melting,
                              runaway_fraction, table, gl_x, gl_w, work, history, fast_work,
-                             info, coarse, fine, out[i])
+                             info, prefix, coarse, fine, coarse_pts, fine_pts, st, fpts, order,
+                             out[i])
