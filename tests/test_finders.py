@@ -126,3 +126,21 @@ def test_a_compiled_caller_finds_the_same_root_as_the_python_driver():
     assert found == prior_bisection_root(g, x_guess, sigma, x_tol, -10.0, 10.0)
     assert n == len(calls)
     assert abs(found - root) <= x_tol   # a jump bracket of 2 x_tol: its midpoint within x_tol
+
+
+def test_history_slopes_read_a_finished_search():
+    # What the next search starts from: the secant across the sign change (on ln H), -inf
+    # where the no-go end had no event (a jump: search the next one by signs), and the go side's
+    # slope between its two lowest go points; None where the history has none.
+    from skidmc.solver.roots import go_side_slope, margin_slope
+
+    h = [1.0, 1.01, 1.02, 1.05]
+    history = [(h[0], 0.02), (h[1], -0.01), (h[2], -0.03), (h[3], -0.07)]
+    assert margin_slope(history) == (-0.01 - 0.02) / (math.log(h[1]) - math.log(h[0]))
+    assert go_side_slope(history) == (-0.03 + 0.01) / (math.log(h[2]) - math.log(h[1]))
+    jump = [(1.0, math.inf), (1.001, math.nan), (1.002, -0.4)]
+    assert margin_slope(jump) == -math.inf          # the NaN run is skipped
+    assert go_side_slope(jump) is None              # one go point only
+    assert margin_slope([(1.0, 0.1), (2.0, 0.05)]) is None   # no sign change
+    assert go_side_slope([(1.0, -0.1), (2.0, -0.05)]) is None   # rising: not a go side
+    assert margin_slope([]) is None and go_side_slope([]) is None

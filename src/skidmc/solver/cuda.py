@@ -127,10 +127,9 @@ def _thread(rows, rtol, h_min, h_max, melt_spread, melting, runaway_fraction, ta
         fine_pts = cuda.local.array(POINTS_SHAPE, np.float64)
         st = cuda.local.array(1, FINDER_STATE)   # the root finder's state
         fpts = cuda.local.array((2, SEARCH_POINTS), np.float64)
-        order = cuda.local.array(SEARCH_POINTS, np.int64)
         _core(rows[i], rtol, h_min, h_max, melt_spread, melting, runaway_fraction, table, gl_x,
               gl_w, work, history, fast_work, info, prefix, coarse, fine, coarse_pts, fine_pts,
-              st, fpts, order, out[i])
+              st, fpts, out[i])
 
 
 #: The types of :func:`_thread`'s arguments, in order: what ``scripts/compile_cuda_ptx.py``

@@ -119,6 +119,7 @@ from skidmc.solver.finders import (
     finder_reset,
     finder_step,
     go_side_start,
+    history_slopes,
     prior_bisection_start,
 )
 from skidmc.solver.model import (
@@ -395,52 +396,21 @@ def _drive(code, value, signs_only, row, sc, n_cells, tol_temperature, melt_widt
 
 
 @njit(cache=True)
-def _history_slopes(pts, n, order):
-    """The CPU search's :func:`~skidmc.solver.roots.margin_slope` and
-    :func:`~skidmc.solver.roots.go_side_slope` of a finished search [1] (NaN for None), on its
-    history as the CPU search keeps it: (exp(x), m) sorted, x read back as ln H."""
-    for i in range(n):
-        order[i] = i
-    for i in range(1, n):   # insertion sort by (exp(x), m)
-        k = order[i]
-        h, m = math.exp(pts[_P_X, k]), pts[_P_M, k]
+def _history_slopes(pts, n, sorted_pts):
+    """The slopes a finished search's points say (:func:`skidmc.solver.finders.history_slopes`,
+    NaN for none), on its history as the CPU search keeps it: (exp(x), m), sorted.
+    ``sorted_pts`` (2 x >= n): scratch for that history."""
+    for i in range(n):   # insertion sort by (H, m), Python's order of (H, m) tuples
+        h, m = math.exp(pts[_P_X, i]), pts[_P_M, i]
         j = i - 1
-        while j >= 0:
-            hj, mj = math.exp(pts[_P_X, order[j]]), pts[_P_M, order[j]]
-            if hj > h or (hj == h and mj > m):
-                order[j + 1] = order[j]
-                j -= 1
-            else:
-                break
-        order[j + 1] = k
-    slope = math.nan
-    x0, m0, have = 0.0, 0.0, False
-    for i in range(n):
-        k = order[i]
-        m1 = pts[_P_M, k]
-        if m1 != m1:
-            continue
-        x1 = math.log(math.exp(pts[_P_X, k]))
-        if have and m0 > 0.0 >= m1 and x1 > x0:
-            slope = -math.inf if m0 == math.inf else (m1 - m0) / (x1 - x0)
-            break
-        x0, m0, have = x1, m1, True
-    go_slope = math.nan
-    found = 0
-    xa, ma = 0.0, 0.0
-    for i in range(n):
-        k = order[i]
-        m1 = pts[_P_M, k]
-        if math.isfinite(m1) and m1 <= 0.0:
-            x1 = math.log(math.exp(pts[_P_X, k]))
-            if found == 0:
-                xa, ma, found = x1, m1, 1
-            else:
-                s = (m1 - ma) / (x1 - xa)
-                if s < 0.0:
-                    go_slope = s
-                break
-    return slope, go_slope
+        while j >= 0 and (sorted_pts[0, j] > h or (sorted_pts[0, j] == h and
+                                                    sorted_pts[1, j] > m)):
+            sorted_pts[0, j + 1] = sorted_pts[0, j]
+            sorted_pts[1, j + 1] = sorted_pts[1, j]
+            j -= 1
+        sorted_pts[0, j + 1] = h
+        sorted_pts[1, j + 1] = m
+    return history_slopes(sorted_pts[0], sorted_pts[1], n)
 
 
 @njit(cache=True)
@@ -452,7 +422,7 @@ def _or_default(value, default):
 @njit(cache=True)
 def _level_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max, h_fast,
                   h_guess, overshoot, slope, go_slope, guess_sigma, res, pts, n_known, work,
-                  history, info, prefix, st, fpts, order):
+                  history, info, prefix, st, fpts):
     """One search at ``level``: the CPU search's :func:`skidmc.solver.search._search` step for
     step, with the same finders (:mod:`skidmc.solver.finders`). Writes ``res`` (``_R_*``) and
     the search's points (``pts``, its first ``n_known`` carried over from the search it
@@ -482,7 +452,7 @@ def _level_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min
         h_fast = math.nan   # the CPU search takes no fast guess after the coarse start
         if res[_R_CENSOR] == CENSOR_NONE:
             h_guess = res[_R_HEIGHT]
-            slope, go_slope = _history_slopes(pts, int(res[_R_N]), order)
+            slope, go_slope = _history_slopes(pts, int(res[_R_N]), fpts)
             overshoot = 2.0 * modelled_error(gap)
         n_known = 0
     _one_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max, h_fast,
@@ -571,20 +541,20 @@ def _one_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, 
 
 @njit(cache=True)
 def _tighten(row, sc, regime, level, melt_width, old_tol, x_tol, x_min, x_max, h_min, h_max,
-             res, pts, work, history, info, prefix, st, fpts, order):
+             res, pts, work, history, info, prefix, st, fpts):
     """The CPU search's ``_tighten``: the search again at the tighter ``x_tol`` from its own
     root, slopes and simulations (no height simulated twice); adds its simulations to
     ``res``'s. A censored search stays as it is."""
     if res[_R_CENSOR] != CENSOR_NONE:
         return
     n = int(res[_R_N])
-    slope, go_slope = _history_slopes(pts, n, order)
+    slope, go_slope = _history_slopes(pts, n, fpts)
     for i in range(n):   # the CPU search's history holds heights: ln of them
         pts[_P_X, i] = math.log(math.exp(pts[_P_X, i]))
     before = res[_R_EVALUATIONS]
     _level_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max,
                   math.nan, res[_R_HEIGHT], old_tol, slope, go_slope, math.nan, res, pts, n,
-                  work, history, info, prefix, st, fpts, order)
+                  work, history, info, prefix, st, fpts)
     res[_R_EVALUATIONS] += before
 
 
@@ -684,7 +654,7 @@ def device_margin(row, x, level, melt_width, melt_spread, melting=True, runaway_
 @njit(cache=True)
 def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_fraction,
                          table, gl_x, gl_w, work, history, fast_work, info, prefix, coarse,
-                         fine, coarse_pts, fine_pts, st, fpts, order, out):
+                         fine, coarse_pts, fine_pts, st, fpts, out):
     """The default full-tier search of one scene (module docstring); results in ``out``.
 
     Parameters
@@ -719,9 +689,7 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     st : ndarray, shape (1,), dtype :data:`skidmc.solver.finders.FINDER_STATE`
         The root finder's state.
     fpts : ndarray, shape (2, SEARCH_POINTS)
-        The root finder's go points.
-    order : ndarray of int64, shape (SEARCH_POINTS,)
-        Scratch for sorting a search's points.
+        The root finder's go points (between searches: scratch for a search's history).
     out : ndarray, shape (OUT_SIZE,)
         Written (see the ``OUT_*`` layout).
     """
@@ -783,7 +751,7 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     coarse_level, fine_level = level - 1.0, level
     _level_search(row, sc, regime, coarse_level, melt_width, coarse_tol, x_min, x_max, h_min,
                   h_max, h_fast, math.nan, math.nan, math.nan, math.nan, math.nan, coarse,
-                  coarse_pts, 0, work, history, info, prefix, st, fpts, order)
+                  coarse_pts, 0, work, history, info, prefix, st, fpts)
     evaluations = coarse[_R_EVALUATIONS]
     if coarse[_R_OK] == 0.0:
         _hand_back(out, _search_failed(sc), evaluations)
@@ -794,12 +762,12 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     # search's slopes.
     coarse_error = modelled_error(coarse_level)
     overshoot = (2.0 * EXACT_FINE_SHIFT if signs else EXACT_STEADY_FINE_OVERSHOOT) * coarse_error
-    slope, go_slope = _history_slopes(coarse_pts, int(coarse[_R_N]), order)
+    slope, go_slope = _history_slopes(coarse_pts, int(coarse[_R_N]), fpts)
     h_guess = coarse[_R_HEIGHT] if coarse[_R_CENSOR] == CENSOR_NONE else math.nan
     _level_search(row, sc, regime, fine_level, melt_width, fine_tol, x_min, x_max, h_min, h_max,
                   h_fast, h_guess, overshoot, slope, go_slope,
                   EXACT_FINE_SHIFT_SPREAD * coarse_error + 0.5 * coarse_tol, fine, fine_pts, 0,
-                  work, history, info, prefix, st, fpts, order)
+                  work, history, info, prefix, st, fpts)
     evaluations += fine[_R_EVALUATIONS]
     if fine[_R_OK] == 0.0:
         _hand_back(out, _search_failed(sc), evaluations)
@@ -835,11 +803,11 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
             if action == TIGHTEN_BOTH:
                 _tighten(row, sc, regime, coarse_level, melt_width, coarse_tol, next_coarse_tol,
                          x_min, x_max, h_min, h_max, coarse, coarse_pts, work, history, info,
-                         prefix, st, fpts, order)
+                         prefix, st, fpts)
             if coarse[_R_OK] == 1.0:
                 _tighten(row, sc, regime, fine_level, melt_width, fine_tol, next_fine_tol, x_min,
-                         x_max, h_min, h_max, fine, fine_pts, work, history, info, prefix, st, fpts,
-                         order)
+                         x_max, h_min, h_max, fine, fine_pts, work, history, info, prefix, st,
+                         fpts)
             evaluations += coarse[_R_EVALUATIONS] + fine[_R_EVALUATIONS] - before
             if coarse[_R_OK] == 0.0 or fine[_R_OK] == 0.0:
                 _hand_back(out, _search_failed(sc), evaluations)
@@ -861,11 +829,11 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
             for k in range(int(fine[_R_N])):
                 for r in range(POINTS_SHAPE[0]):
                     coarse_pts[r, k] = fine_pts[r, k]
-            slope, go_slope = _history_slopes(coarse_pts, int(coarse[_R_N]), order)
+            slope, go_slope = _history_slopes(coarse_pts, int(coarse[_R_N]), fpts)
             _level_search(row, sc, regime, fine_level + 1.0, melt_width, next_fine_tol, x_min,
                           x_max, h_min, h_max, h_fast, value,
                           0.5 * abs(relative) + next_fine_tol, slope, go_slope, math.nan, fine,
-                          fine_pts, 0, work, history, info, prefix, st, fpts, order)
+                          fine_pts, 0, work, history, info, prefix, st, fpts)
             evaluations += fine[_R_EVALUATIONS]
             coarse_level, fine_level = fine_level, fine_level + 1.0
             if fine[_R_OK] == 0.0 or fine[_R_CENSOR] != CENSOR_NONE:
@@ -906,8 +874,7 @@ def critical_heights_cpu(rows, rtol, h_min, h_max, melt_spread, melting, runaway
         fine_pts = np.empty(POINTS_SHAPE)
         st = np.empty(1, dtype=FINDER_STATE)   # finder_reset before every use
         fpts = np.empty((2, SEARCH_POINTS))
-        order = np.empty(SEARCH_POINTS, dtype=np.int64)
         critical_height_core(rows[i], rtol, h_min, h_max, melt_spread, melting,
                              runaway_fraction, table, gl_x, gl_w, work, history, fast_work,
-                             info, prefix, coarse, fine, coarse_pts, fine_pts, st, fpts, order,
+                             info, prefix, coarse, fine, coarse_pts, fine_pts, st, fpts,
                              out[i])

@@ -66,6 +66,7 @@ __all__ = [
     "finder_step",
     "go_side_start",
     "guided_start",
+    "history_slopes",
     "normal_cdf",
     "normal_quantile",
     "prior_bisection_start",
@@ -756,6 +757,52 @@ def _brent_next(s):
 def _brent_tell(s, m):
     s.fcur = _bounded(s, m)
     return _brent_next(s)
+
+
+# ------------------------------------------------------------- what a finished search says
+
+
+@njit(cache=True)
+def history_slopes(heights, margins, n):
+    """What a finished search's history says of the margin's slope [1], for the next search.
+
+    ``heights`` [m] and ``margins`` [1]: the search's first ``n`` simulations, sorted by
+    (height, margin). Returns (``slope``, ``go_slope``), NaN where there is none:
+
+    * ``slope``: d margin / d ln H across the history's sign change (the first no-go point,
+      m > 0, followed by a go point, m <= 0, higher up); -inf where the no-go end has no event
+      (margin inf: a run stopped at the exit, searched by its signs, or none within the
+      horizon): the margin is taken to jump there (steeper than :data:`JUMP_SLOPE`), so the
+      next search locates the root by its signs too. NaN margins are skipped.
+    * ``go_slope``: d margin / d ln H between the two go points (finite m <= 0) closest to the
+      root, when negative.
+    """
+    slope = math.nan
+    x0, m0, have = 0.0, 0.0, False
+    for i in range(n):
+        m1 = margins[i]
+        if math.isnan(m1):
+            continue
+        x1 = math.log(heights[i])
+        if have and m0 > 0.0 >= m1 and x1 > x0:
+            slope = -math.inf if m0 == math.inf else (m1 - m0) / (x1 - x0)
+            break
+        x0, m0, have = x1, m1, True
+    go_slope = math.nan
+    found = False
+    xa, ma = 0.0, 0.0
+    for i in range(n):
+        m1 = margins[i]
+        if math.isfinite(m1) and m1 <= 0.0:
+            x1 = math.log(heights[i])
+            if not found:
+                xa, ma, found = x1, m1, True
+            else:
+                s = (m1 - ma) / (x1 - xa)
+                if s < 0.0:
+                    go_slope = s
+                break
+    return slope, go_slope
 
 
 # --------------------------------------------------------------------------------- driving

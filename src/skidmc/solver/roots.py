@@ -63,28 +63,32 @@ __all__ = [
 # both searches run; they are re-exported here, where the searches' docs name them.
 
 
+def _history_slopes(history):
+    """:func:`skidmc.solver.finders.history_slopes` of a history [(H [m], margin), ...] sorted
+    by (H, margin), as the searches keep it."""
+    if not history:
+        return math.nan, math.nan
+    heights, margins = np.array(history, dtype=np.float64).T.copy()
+    return finders.history_slopes(heights, margins, len(history))
+
+
 def margin_slope(history):
     """d margin / d ln H [1] across the sign change of a finished search's history, or None.
 
     -inf where the no-go end has no event (margin inf: a run stopped at the exit, searched by
     its signs, or none within the horizon): the margin is taken to jump there (steeper than
-    :data:`JUMP_SLOPE`), so the next search locates the root by its signs too.
+    :data:`JUMP_SLOPE`), so the next search locates the root by its signs too
+    (:func:`skidmc.solver.finders.history_slopes`, which the device search calls too).
     """
-    pts = [(math.log(h), m) for h, m in history if not math.isnan(m)]
-    for (x0, m0), (x1, m1) in zip(pts, pts[1:]):
-        if m0 > 0.0 >= m1 and x1 > x0:
-            return -math.inf if m0 == math.inf else (m1 - m0) / (x1 - x0)
-    return None
+    slope = _history_slopes(history)[0]
+    return None if math.isnan(slope) else slope
 
 
 def go_side_slope(history):
-    """d margin / d ln H [1] between the two go points (m <= 0) closest to the root, or None."""
-    go = [(math.log(h), m) for h, m in history if math.isfinite(m) and m <= 0.0]
-    if len(go) < 2:
-        return None
-    (x0, m0), (x1, m1) = go[0], go[1]
-    slope = (m1 - m0) / (x1 - x0)
-    return slope if slope < 0.0 else None
+    """d margin / d ln H [1] between the two go points (m <= 0) closest to the root, or None
+    (:func:`skidmc.solver.finders.history_slopes`)."""
+    slope = _history_slopes(history)[1]
+    return None if math.isnan(slope) else slope
 
 
 def _nan_for_none(value):
