@@ -132,12 +132,14 @@ def test_device_estimate_bounds_its_error_against_a_tight_solve():
         assert abs(dev.critical_height / reference - 1.0) <= dev.error_estimate, scene
 
 
+@pytest.mark.parametrize("rtol", [1e-2, 1e-3])
 @pytest.mark.parametrize("case_id, preset, overrides, outcomes, flags", MATRIX,
                          ids=[c[0] for c in MATRIX])
-def test_device_search_on_the_extremes_matrix(case_id, preset, overrides, outcomes, flags):
+def test_device_search_on_the_extremes_matrix(case_id, preset, overrides, outcomes, flags, rtol):
+    # At 1e-3 more of the search runs: tightened roots, refined pairs, jumps located by signs.
     scene = make_scene(preset=preset, **overrides)
-    (dev,) = solve_scenes([scene], backend="cpu", rtol=1e-2, h_min=H_MIN, h_max=H_MAX)
-    cpu = critical_height(scene, rtol=1e-2, h_min=H_MIN, h_max=H_MAX)
+    (dev,) = solve_scenes([scene], backend="cpu", rtol=rtol, h_min=H_MIN, h_max=H_MAX)
+    cpu = critical_height(scene, rtol=rtol, h_min=H_MIN, h_max=H_MAX)
     assert dev.censored == cpu.censored, case_id
     assert math.isfinite(dev.critical_height)
     if dev.method == "device":
@@ -248,10 +250,12 @@ def test_evaluate_batch_and_studies_take_the_cuda_backend_under_the_simulator(tm
         "censored_above", "ok", "ok", "failed"]
     assert result["flags"][0] == result["flags"][1]
     assert result["failure_reason"][0] == result["failure_reason"][1]
+    # The simulator's threads run the CPU build of the device search, which finds the CPU
+    # search's heights to the last bit (a real GPU may move the last bits: FMA contraction).
     ok = np.isfinite(cpu_h)
-    assert np.all(np.abs(gpu_h[ok] / cpu_h[ok] - 1.0) <= 1e-2)
+    np.testing.assert_array_equal(gpu_h[ok], cpu_h[ok])
 
-    # A study with [solver] backend = "cuda": the same samples as on the CPU, within rtol.
+    # A study with [solver] backend = "cuda": the same samples as on the CPU.
     for backend in ("cuda", "cpu"):
         (tmp_path / f"{backend}.toml").write_text(
             TINY.replace("[solver]", f'[solver]\nbackend = "{backend}"'))
@@ -272,7 +276,7 @@ def test_evaluate_batch_and_studies_take_the_cuda_backend_under_the_simulator(tm
     heights = json.loads(proc.stdout.strip().splitlines()[-1])
     gpu_h, cpu_h = np.array(heights["cuda"]), np.array(heights["cpu"])
     assert gpu_h.shape == cpu_h.shape == (24,) and np.isfinite(cpu_h).all()
-    assert np.all(np.abs(gpu_h / cpu_h - 1.0) <= 1e-2)
+    np.testing.assert_array_equal(gpu_h, cpu_h)
 
 
 def test_study_backend_is_checked_by_name(tmp_path):
