@@ -56,25 +56,32 @@ PHASES = ("first pair", "melt bias", "tighten", "narrow", "refine", "fast guess"
 
 
 class Instrument:
-    """Wraps the default search's steps (module globals of ``skidmc.solver.search``) to
-    attribute each simulation's time and attempts to a phase of the search."""
+    """Attributes each simulation of the default search to a phase of the search: the stage of
+    the search machine (``skidmc.solver.adaptive``) that asked for it, read when the CPU search
+    asks the machine what to run (``adaptive.asked``); and records the first pair's estimate."""
 
     def __init__(self):
-        from skidmc.solver import search
+        from skidmc.solver import adaptive, search
 
-        self.search = search
-        self.saved = {}
-        self.phase = ["other"]
+        self.search, self.adaptive = search, adaptive
+        self.saved = []
+        self.phase = "other"
         self.seconds = defaultdict(float)
         self.attempts = defaultdict(int)
         self.runs = defaultdict(int)
-        self.first_width = None
-        self.estimates = []   # error estimates of the search's Richardson pairs, in order
+        self.estimates = []   # the first pair's error estimate, one per search
+        a = adaptive
+        self.stage_phase = {a._S_COARSE: "first pair", a._S_FINE: "first pair",
+                            a._S_BIAS: "melt bias", a._S_NARROW_BIAS: "melt bias",
+                            a._S_TIGHTEN_C: "tighten", a._S_TIGHTEN_F: "tighten",
+                            a._S_NARROW_C: "narrow", a._S_NARROW_F: "narrow",
+                            a._S_REFINE: "refine"}
+        self.first_pair = {a._S_COARSE, a._S_FINE, a._S_BIAS}
 
-    def _wrap(self, name, make):
-        original = getattr(self.search, name)
-        self.saved[name] = original
-        setattr(self.search, name, make(original))
+    def _wrap(self, module, name, make):
+        original = getattr(module, name)
+        self.saved.append((module, name, original))
+        setattr(module, name, make(original))
 
     def __enter__(self):
         inst = self
@@ -85,50 +92,29 @@ class Instrument:
                 try:
                     sim = original(model, height, **kw)
                 finally:
-                    inst.seconds[inst.phase[-1]] += time.perf_counter() - t0
-                    inst.runs[inst.phase[-1]] += 1
-                inst.attempts[inst.phase[-1]] += sim.steps + sim.rejected
+                    inst.seconds[inst.phase] += time.perf_counter() - t0
+                    inst.runs[inst.phase] += 1
+                inst.attempts[inst.phase] += sim.steps + sim.rejected
                 return sim
             return wrapped
 
-        def in_phase(phase):
-            def make(original):
-                def wrapped(*args, **kw):
-                    inst.phase.append(phase)
-                    try:
-                        return original(*args, **kw)
-                    finally:
-                        inst.phase.pop()
-                return wrapped
-            return make
-
-        def search_(original):
-            def wrapped(*args, **kw):
-                caller = sys._getframe(1).f_code.co_name
-                phase = inst.phase[-1]
-                if caller == "_adaptive_pair":
-                    width = args[1].melt_width   # _search(scene, opts, level, x_tol, ...)
-                    if inst.first_width is None:
-                        inst.first_width, phase = width, "first pair"
-                    elif width != inst.first_width:
-                        phase = "narrow"
-                    else:
-                        phase = "refine"
-                inst.phase.append(phase)
-                try:
-                    return original(*args, **kw)
-                finally:
-                    inst.phase.pop()
+        def asked(original):
+            def wrapped(ps):
+                stage = int(ps[0]["stage"])
+                if stage not in inst.first_pair and len(inst.estimates) == 0:
+                    inst.estimates.append(float(ps[0]["estimate"]))   # the first pair's
+                inst.phase = inst.stage_phase[stage]
+                return original(ps)
             return wrapped
 
-        def fine(original):
-            def wrapped(scene, opts, level, x_tol, coarse, coarse_tol):
-                phase = "narrow" if opts.melt_width != inst.first_width else "first pair"
-                inst.phase.append(phase)
-                try:
-                    return original(scene, opts, level, x_tol, coarse, coarse_tol)
-                finally:
-                    inst.phase.pop()
+        def outcome(original):
+            def wrapped(ps):
+                if len(inst.estimates) == 0:   # no round asked for a run
+                    s = ps[0]
+                    inst.estimates.append(float(s["estimate"] if s["extrapolated"]
+                                                else s["out_error"]))
+                inst.phase = "other"
+                return original(ps)
             return wrapped
 
         def fast_guess(original):
@@ -140,25 +126,15 @@ class Instrument:
                     inst.seconds["fast guess"] += time.perf_counter() - t0
             return wrapped
 
-        def pair_value(original):
-            def wrapped(*args, **kw):
-                res, pair = original(*args, **kw)
-                inst.estimates.append(res.error_estimate)
-                return res, pair
-            return wrapped
-
-        self._wrap("_adaptive_value", pair_value)
-        self._wrap("simulate", simulate)
-        self._wrap("_search", search_)
-        self._wrap("_fine_search", fine)
-        self._wrap("_tighten", in_phase("tighten"))
-        self._wrap("_melt_width_bias", in_phase("melt bias"))
-        self._wrap("_fast_guess", fast_guess)
+        self._wrap(self.search, "simulate", simulate)
+        self._wrap(self.adaptive, "asked", asked)
+        self._wrap(self.adaptive, "outcome", outcome)
+        self._wrap(self.search, "_fast_guess", fast_guess)
         return self
 
     def __exit__(self, *exc):
-        for name, original in self.saved.items():
-            setattr(self.search, name, original)
+        for module, name, original in reversed(self.saved):
+            setattr(module, name, original)
 
 
 def regime(scene):

@@ -5,17 +5,18 @@ The default search (:func:`skidmc.critical_height`) brings a Richardson pair of 
 fix its measured parts say will do (tighten the roots, narrow the melting width, or move the
 pair up a level). That rule used to be written twice, in Python for the CPU search and in the
 compiled device search (:mod:`skidmc.solver.device`, CPU threads and GPU), and every change had
-to be made and validated in both. Both now call the functions here, compiled with numba, so the
-arithmetic of a decision is one text: the CPU search (:func:`skidmc.solver.search._adaptive_pair`)
-calls them from Python, the device search from compiled code (a CUDA device function on a GPU).
+to be made and validated in both. The functions here are compiled with numba and called by the
+one compiled search of :mod:`skidmc.solver.adaptive`, which both the CPU search
+(:func:`skidmc.solver.search._adaptive_pair`) and the device search drive (a CUDA device
+function on a GPU), so the arithmetic of a decision is one text.
 
-How a root is found is one text too: the root finders are compiled state machines
-(:mod:`skidmc.solver.finders`) that both searches drive with their own runs. What remains
-path-specific: how a run is made (:func:`skidmc.solver.simulate.simulate` on any model, or the
-device's run of a constant-property exact target on a thread's storage), and the actions the
-device cannot take (narrowing the melting width, whose bias the CPU search measures with an
-extra simulation, and levels above :data:`skidmc.solver.device.DEVICE_MAX_LEVEL`): there the
-device hands the scene to the CPU search.
+How a root is found is one text too (the compiled root finders of
+:mod:`skidmc.solver.finders`). What remains path-specific: how a run is made
+(:func:`skidmc.solver.simulate.simulate` on any model, or the device's run of a
+constant-property exact target on a thread's storage), and the actions the device cannot take
+(narrowing the melting width, whose bias the CPU search measures with an extra simulation, and
+levels above :data:`skidmc.solver.device.DEVICE_MAX_LEVEL`): there the device hands the scene
+to the CPU search.
 
 Every function is pure arithmetic on floats (no allocation, no Python objects), in the order
 the search has always computed it, so that the results are unchanged to the last bit

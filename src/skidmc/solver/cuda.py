@@ -30,13 +30,11 @@ import numpy as np
 from skidmc.errors import SceneError
 from skidmc.physics.fast import N_TIMES
 from skidmc.physics.records import KERNEL_RUN
+from skidmc.solver.adaptive import PAIR_STATE, POINTS_SHAPE, RESULT_SIZE, SEARCH_POINTS
 from skidmc.solver.device import (
     HISTORY_SHAPE,
     MAX_CELLS,
-    POINTS_SHAPE,
     PREFIX_SIZE,
-    RESULT_SIZE,
-    SEARCH_POINTS,
     WORK_ROWS,
     critical_height_core,
 )
@@ -106,6 +104,7 @@ cuda = None
 _WORK_SHAPE = (WORK_ROWS, MAX_CELLS)
 _HISTORY_SHAPE = HISTORY_SHAPE
 _FAST_SHAPE = (3, N_TIMES)
+_POINTS_SHAPE = (2,) + POINTS_SHAPE   # the pair's two searches' points
 _KERNEL = None
 
 
@@ -121,15 +120,13 @@ def _thread(rows, rtol, h_min, h_max, melt_spread, melting, runaway_fraction, ta
         fast_work = cuda.local.array(_FAST_SHAPE, np.float64)
         info = cuda.local.array(1, KERNEL_RUN)   # the current run's input and outcome
         prefix = cuda.local.array(PREFIX_SIZE, np.float64)   # the search's linear prefix
-        coarse = cuda.local.array(RESULT_SIZE, np.float64)
-        fine = cuda.local.array(RESULT_SIZE, np.float64)
-        coarse_pts = cuda.local.array(POINTS_SHAPE, np.float64)
-        fine_pts = cuda.local.array(POINTS_SHAPE, np.float64)
+        ps = cuda.local.array(1, PAIR_STATE)   # the search machine's state
+        res = cuda.local.array((2, RESULT_SIZE), np.float64)
+        pts = cuda.local.array(_POINTS_SHAPE, np.float64)
         st = cuda.local.array(1, FINDER_STATE)   # the root finder's state
         fpts = cuda.local.array((2, SEARCH_POINTS), np.float64)
         _core(rows[i], rtol, h_min, h_max, melt_spread, melting, runaway_fraction, table, gl_x,
-              gl_w, work, history, fast_work, info, prefix, coarse, fine, coarse_pts, fine_pts,
-              st, fpts, out[i])
+              gl_w, work, history, fast_work, info, prefix, ps, res, pts, st, fpts, out[i])
 
 
 #: The types of :func:`_thread`'s arguments, in order: what ``scripts/compile_cuda_ptx.py``

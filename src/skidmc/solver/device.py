@@ -5,33 +5,27 @@ search of :func:`skidmc.solver.critical_height` on the same model: the exact tar
 HE meshed, the target through Duhamel's integral), the melting spread over each HE cell, and
 the scene's own plan (its regime, :func:`exit_regime_code`, chooses the first pair and its root
 tolerances through the same compiled functions of :mod:`skidmc.solver.plan` and
-:mod:`skidmc.solver.controller`). Then, step for step as the CPU search
-(:mod:`skidmc.solver.search`): the fast tier's height as first guess (or the root two levels
-down), each level's search by the same compiled root finders (:mod:`skidmc.solver.finders`:
-the go-side extrapolation, the prior bisection by signs with runs that stop at the exit, the
-guided bracket, bracketing and Brent's method), the runs of one search sharing their linear
-prefix, a Richardson pair of levels, its a posteriori error estimate, and the same adaptive
-rounds (tighten the roots from their own simulations, or move the pair up a level) while that
-estimate exceeds ``rtol``: the estimate and each round's decision are the compiled functions of
-:mod:`skidmc.solver.controller`. It calls the same compiled kernels as the CPU search
-(:func:`skidmc.physics.thermal.simulate_core`, :func:`skidmc.physics.fast.fast_height_core`,
-:func:`skidmc.physics.meshes.fill_meshes`, :func:`skidmc.physics.mechanics.impact_constants`
-and the model's scalar functions), on storage the caller owns: NumPy arrays on the CPU, a
-thread's local memory on the GPU (:mod:`skidmc.solver.cuda`). Nothing here allocates, raises or
-touches Python objects, which is what a CUDA device function needs.
+:mod:`skidmc.solver.controller`). The search itself is not written here: it is the compiled
+machine of :mod:`skidmc.solver.adaptive`, the CPU search's own, which this function drives with
+its runs (:func:`_margin`: the same compiled kernel as the CPU search's,
+:func:`skidmc.physics.thermal.simulate_core`, on storage the caller owns: NumPy arrays on the
+CPU, a thread's local memory on the GPU, :mod:`skidmc.solver.cuda`), building a level's mesh
+when the machine moves to it and starting the linear prefix and the stall cap anew with each of
+its searches. The fast tier's height (:func:`skidmc.physics.fast.fast_height_core`) is the first
+guess. Nothing here allocates, raises or touches Python objects, which is what a CUDA device
+function needs.
 
 One search, two drivers
 -----------------------
-The search's decisions (which finder, where to simulate next, when a root is found, how the
-pair's estimate is measured and what the next round does) are compiled functions that both
-searches call; each search only runs the simulations they ask for, the CPU search through
-:func:`skidmc.solver.simulate.simulate`, this one through :func:`_margin` on the same kernel
-and inputs. One run at one height is the CPU model's run to the last bit (:func:`device_margin`),
-so on the scenes it takes the device search finds the CPU search's heights, error estimates
-and simulation counts to the last bit (``tests/test_device.py``;
-``benchmarks/heights_fingerprint.py``: 185 study and preset scenes at rtol 1e-2, 3e-3 and 1e-3).
-Across machines the last bits may differ: the kernels' fused multiply-adds are the compiling
-machine's choice (docs/model.md).
+Every decision of the search (which search, where to simulate next, when a root is found, the
+pair's estimate and each round) is compiled code that both searches run; each only answers the
+runs it asks for, the CPU search through :func:`skidmc.solver.simulate.simulate`, this one
+through :func:`_margin` on the same kernel and inputs. One run at one height is the CPU model's
+run to the last bit (:func:`device_margin`), so on the scenes it takes the device search finds
+the CPU search's heights, error estimates and simulation counts to the last bit
+(``tests/test_device.py``; ``benchmarks/heights_fingerprint.py``: 185 study and preset scenes at
+rtol 1e-2, 3e-3 and 1e-3). Across machines the last bits may differ: the kernels' fused
+multiply-adds are the compiling machine's choice (docs/model.md).
 
 What is sent back to the CPU search
 -----------------------------------
@@ -42,7 +36,7 @@ pairs that ask for a narrower width, pairs that would have to move above
 :data:`DEVICE_MAX_LEVEL` (the thread's fixed-size arrays), runs that outgrow the thread's flux
 history (:data:`DEVICE_HISTORY`), searches that need more than :data:`SEARCH_POINTS`
 simulations, and any search that fails (integration failure, stall, a finder that ends without
-a root, a refined root censored): the CPU search then gives the result, or the failure with its
+a root): the CPU search then gives the result, or the failure with its
 reason. Scenes the row of floats cannot carry go there too, before any device work is trusted:
 layered targets whose heat reaches below the top layer, and targets whose properties follow a
 temperature table ("temperature_target"; the exact target has constant properties). The batch
@@ -66,7 +60,6 @@ from numba import njit, prange
 from skidmc.physics.fast import (
     C_IGNITION,
     CENSOR_ABOVE,
-    CENSOR_BELOW,
     CENSOR_NONE,
     MELT_FACTOR,
     N_TIMES,
@@ -90,63 +83,37 @@ from skidmc.physics.thermal import (
     prefix_size,
     simulate_core,
 )
-from skidmc.solver.controller import (
-    DONE,
-    MAX_ADAPTIVE_ROUNDS,
-    NARROW,
-    REFINE,
-    TIGHTEN_BOTH,
-    TIGHTEN_FINE,
-    first_root_tolerances,
-    next_round,
-    pair_estimate,
-    richardson_value,
+from skidmc.solver.adaptive import (
+    ASK_RUN,
+    BACK_LEVEL,
+    BACK_NARROW,
+    HAND_BACK,
+    PAIR_STATE,
+    POINTS_SHAPE,
+    REGIME_FADING,
+    REGIME_STEADY,
+    REGIME_STOPS_SLIDING,
+    RESULT_SIZE,
+    SEARCH_POINTS,
+    pair_start,
+    pair_step,
 )
-from skidmc.solver.finders import (
-    ASK,
-    BAD_PROBABILITY,
-    CENSORED_ABOVE,
-    CENSORED_BELOW,
-    FAST_GUESS_ERROR,
-    FINDER_STATE,
-    GIVE_UP,
-    GO_SIDE_MAX_SIMULATIONS,
-    GUIDED_MAX_SIMULATIONS,
-    JUMP_SLOPE,
-    ROOT,
-    brent_start,
-    finder_point,
-    finder_reset,
-    finder_step,
-    go_side_start,
-    history_slopes,
-    prior_bisection_start,
-)
+from skidmc.solver.controller import first_root_tolerances
+from skidmc.solver.finders import FINDER_STATE
 from skidmc.solver.model import (
     BASE_RESOLUTION,
     DEPTH_DIFFUSION_LENGTHS,
     HORIZON_EXIT_TIMES,
-    MELT_WIDTH_BIAS_PER_K,
     flux_extension,
     ignition_temperature,
     level_resolution,
-    melt_width_floor,
     model_runaway_temperature,
 )
 from skidmc.solver.options import FADING_EXIT_SPEED
 from skidmc.solver.plan import (
-    EXACT_FINE_SHIFT,
-    EXACT_FINE_SHIFT_SPREAD,
-    EXACT_STEADY_FINE_OVERSHOOT,
     exact_first_pair_level,
     melt_width_for_rtol,
     modelled_error,
-)
-from skidmc.solver.search import (
-    COARSE_GAP,
-    FADING_FAST_SHIFT,
-    FADING_FAST_SPREAD,
-    FAST_STOPS_SLIDING_SPREAD,
 )
 from skidmc.solver.simulate import run_cap
 
@@ -197,25 +164,12 @@ HISTORY_SHAPE = (HISTORY_ROWS, DEVICE_HISTORY + 1)
 #: Length of a thread's linear prefix (:class:`skidmc.solver.simulate.LinearPrefix`) at the
 #: finest mesh, :data:`MAX_CELLS` HE cells: 8.6 KB.
 PREFIX_SIZE = int(prefix_size.py_func(MAX_CELLS))
-#: Points one search at one level may hold (its simulations, and those of the search it
-#: tightens); a search that needs more goes to the CPU search. The CPU search's finders stop
-#: after 8 + 41 (go side, then guided), 40 + 41 (prior bisection, then guided) or 60 + 100
-#: (bracketing, then Brent) simulations; study scenes use 2-10 per search.
-SEARCH_POINTS = 128
-#: Shape of a search's points: rows ln H (as the CPU search's cache keys it), margin, and 1
-#: where the run stopped at the exit without an event (to be run again in full by Brent).
-POINTS_SHAPE = (3, SEARCH_POINTS)
-_P_X, _P_M, _P_SIGN_ONLY = 0, 1, 2
-#: Length of a search's result array (the ``_R_*`` layout).
-RESULT_SIZE = 8
-_R_X, _R_CENSOR, _R_HEIGHT, _R_N, _R_EVALUATIONS, _R_OK = 0, 1, 2, 3, 6, 7
 
 #: Result codes of :func:`critical_height_core` (``out[OUT_STATUS]``).
 STATUS_OK, STATUS_CPU = 0, 1
 #: Why a scene went to the CPU search (``out[OUT_REASON]``): an elastic target; melting with
 #: the ignition temperature below the melting point; a search that failed (integration failure,
-#: stall, a finder that ends without a root, more points than :data:`SEARCH_POINTS`, a refined
-#: root censored); a run
+#: stall, a finder that ends without a root, more points than :data:`SEARCH_POINTS`); a run
 #: that outgrew :data:`DEVICE_HISTORY`; a narrower melting width; a level above
 #: :data:`DEVICE_MAX_LEVEL`.
 (HANDBACK_NONE, HANDBACK_ELASTIC, HANDBACK_IGNITION_BELOW_MELTING, HANDBACK_FAILED,
@@ -223,8 +177,6 @@ STATUS_OK, STATUS_CPU = 0, 1
 #: Names of the ``HANDBACK_*`` codes, in order.
 HANDBACK_REASONS = ("none", "elastic_target", "ignition_below_melting", "search_failed",
                     "history_full", "narrow_width", "level_cap")
-#: How the heating ends (:func:`exit_regime_code`; :func:`skidmc.solver.options.exit_regime`).
-REGIME_STEADY, REGIME_FADING, REGIME_STOPS_SLIDING = 0, 1, 2
 
 # Layout of the output row.
 OUT_HEIGHT = 0          # critical height [m] (the bound when censored)
@@ -358,207 +310,6 @@ def _margin(x, row, sc, n_cells, tol_temperature, melt_width, until_exit, work, 
 
 
 @njit(cache=True)
-def _find(pts, n, x):
-    """Index of the point at exactly ``x`` among the first ``n`` of ``pts``, or -1."""
-    for i in range(n):
-        if pts[_P_X, i] == x:
-            return i
-    return -1
-
-
-@njit(cache=True)
-def _drive(code, value, signs_only, row, sc, n_cells, tol_temperature, melt_width, pts, n,
-           work, history, info, prefix, st, fpts):
-    """Answer the finder's questions (:mod:`skidmc.solver.finders`) with the search's runs,
-    each height simulated once (``pts``: the search's points, its first ``n`` known).
-
-    As the CPU search's margin: with ``signs_only`` a run stops at the exit, and one without
-    an event by then is marked (row ``_P_SIGN_ONLY``) to be run again in full if Brent's method
-    needs it. Returns the finder's last (code, value), the points now held, and False when a
-    run failed or the points overflow ``pts`` (the search then goes to the CPU).
-    """
-    while code == ASK:
-        i = _find(pts, n, value)
-        if i >= 0:
-            m = pts[_P_M, i]
-        else:
-            if n >= pts.shape[1]:
-                return code, value, n, False
-            m, event = _margin(value, row, sc, n_cells, tol_temperature, melt_width, signs_only,
-                               work, history, info, prefix)
-            if m != m:
-                return code, value, n, False
-            pts[_P_X, n], pts[_P_M, n] = value, m
-            pts[_P_SIGN_ONLY, n] = 1.0 if signs_only and not event else 0.0
-            n += 1
-        code, value = finder_step(st, fpts, m)
-    return code, value, n, True
-
-
-@njit(cache=True)
-def _history_slopes(pts, n, sorted_pts):
-    """The slopes a finished search's points say (:func:`skidmc.solver.finders.history_slopes`,
-    NaN for none), on its history as the CPU search keeps it: (exp(x), m), sorted.
-    ``sorted_pts`` (2 x >= n): scratch for that history."""
-    for i in range(n):   # insertion sort by (H, m), Python's order of (H, m) tuples
-        h, m = math.exp(pts[_P_X, i]), pts[_P_M, i]
-        j = i - 1
-        while j >= 0 and (sorted_pts[0, j] > h or (sorted_pts[0, j] == h and
-                                                    sorted_pts[1, j] > m)):
-            sorted_pts[0, j + 1] = sorted_pts[0, j]
-            sorted_pts[1, j + 1] = sorted_pts[1, j]
-            j -= 1
-        sorted_pts[0, j + 1] = h
-        sorted_pts[1, j + 1] = m
-    return history_slopes(sorted_pts[0], sorted_pts[1], n)
-
-
-@njit(cache=True)
-def _or_default(value, default):
-    """Python's ``value or default`` for an optional float (NaN: None)."""
-    return default if value != value or value == 0.0 else value
-
-
-@njit(cache=True)
-def _level_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max, h_fast,
-                  h_guess, overshoot, slope, go_slope, guess_sigma, res, pts, n_known, work,
-                  history, info, prefix, st, fpts):
-    """One search at ``level``: the CPU search's :func:`skidmc.solver.search._search` step for
-    step, with the same finders (:mod:`skidmc.solver.finders`). Writes ``res`` (``_R_*``) and
-    the search's points (``pts``, its first ``n_known`` carried over from the search it
-    tightens, as ln of the heights the CPU search keeps).
-
-    Without a guess (NaN), a level at or above :data:`~skidmc.solver.search.COARSE_GAP` starts
-    from the root two levels down (that search's points are then dropped: the CPU search keeps
-    them in a search of its own), a lower one from the fast tier's height ``h_fast`` (NaN:
-    none). From a guess, a rebound's root is extrapolated along the go side; where sliding
-    stops, the margin jumped at the guess's root (``slope`` steeper than
-    :data:`~skidmc.solver.finders.JUMP_SLOPE`) or the heating fades, the root's prior is
-    bisected, with runs that stop at the exit. Otherwise, or when the guided finder gives up,
-    bracketing and Brent's method. ``overshoot``, ``slope``, ``go_slope``, ``guess_sigma``: as
-    there, NaN for None.
-    """
-    evaluations = 0
-    if h_guess != h_guess and level >= COARSE_GAP:
-        # Two levels down (below COARSE_GAP on the device: DEVICE_MAX_LEVEL < 2 COARSE_GAP),
-        # from the fast tier's height.
-        gap = level - COARSE_GAP
-        _one_search(row, sc, regime, gap, melt_width, max(x_tol, 0.2 * modelled_error(gap)),
-                    x_min, x_max, h_min, h_max, h_fast, math.nan, math.nan, math.nan, math.nan,
-                    math.nan, res, pts, 0, work, history, info, prefix, st, fpts)
-        evaluations = int(res[_R_EVALUATIONS])
-        if res[_R_OK] == 0.0:
-            return
-        h_fast = math.nan   # the CPU search takes no fast guess after the coarse start
-        if res[_R_CENSOR] == CENSOR_NONE:
-            h_guess = res[_R_HEIGHT]
-            slope, go_slope = _history_slopes(pts, int(res[_R_N]), fpts)
-            overshoot = 2.0 * modelled_error(gap)
-        n_known = 0
-    _one_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max, h_fast,
-                h_guess, overshoot, slope, go_slope, guess_sigma, res, pts, n_known, work,
-                history, info, prefix, st, fpts)
-    res[_R_EVALUATIONS] += evaluations
-
-
-@njit(cache=True)
-def _one_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max, h_fast,
-                h_guess, overshoot, slope, go_slope, guess_sigma, res, pts, n_known, work,
-                history, info, prefix, st, fpts):
-    """:func:`_level_search` at ``level`` itself (no coarse start)."""
-    res[_R_OK] = 0.0
-    from_fast = False
-    if h_guess != h_guess and h_fast == h_fast:
-        h_guess, overshoot, from_fast = h_fast, FAST_GUESS_ERROR, True
-    for i in range(n_known):
-        pts[_P_SIGN_ONLY, i] = 0.0   # stopped at the exit in an earlier search: kept as known
-    n_cells, tol_temperature = _build_level(row, sc, level, work, history)
-    sc[_S_MOST] = 0.0      # the stall cap counts this search's runs (run_cap)
-    sc[_S_PREFIX_H] = 0.0  # and its first run records its linear prefix
-    has_guess = h_guess == h_guess
-    jumped = slope < -JUMP_SLOPE
-    fading = from_fast and regime == REGIME_FADING
-    signs_only = has_guess and (regime == REGIME_STOPS_SLIDING or jumped or fading)
-    finder_reset(st)
-    code, value = GIVE_UP, math.nan
-    if has_guess and regime != REGIME_STOPS_SLIDING and not (jumped or fading):
-        for i in range(n_known):
-            if math.isfinite(pts[_P_M, i]):
-                finder_point(st, fpts, pts[_P_X, i], pts[_P_M, i])
-        code, value = go_side_start(st, fpts, math.log(h_guess), go_slope, x_tol, x_min, x_max,
-                                    _or_default(overshoot, FAST_GUESS_ERROR),
-                                    GO_SIDE_MAX_SIMULATIONS)
-    elif has_guess:
-        if fading:
-            center, sigma = math.log(h_guess) + FADING_FAST_SHIFT, FADING_FAST_SPREAD
-        elif from_fast:
-            center, sigma = math.log(h_guess), FAST_STOPS_SLIDING_SPREAD
-        else:
-            spread = 0.5 * _or_default(overshoot, FAST_GUESS_ERROR)
-            center, sigma = math.log(h_guess) + spread, _or_default(guess_sigma, spread / 3.0)
-        for i in range(n_known):
-            m = pts[_P_M, i]
-            if math.isfinite(m) or (signs_only and m == math.inf):
-                finder_point(st, fpts, pts[_P_X, i], m)
-        code, value = prior_bisection_start(st, fpts, center, sigma, x_tol, x_min, x_max,
-                                            GUIDED_MAX_SIMULATIONS, slope, signs_only)
-    n = n_known
-    code, value, n, ok = _drive(code, value, signs_only, row, sc, n_cells, tol_temperature,
-                                melt_width, pts, n, work, history, info, prefix, st, fpts)
-    if ok and code == BAD_PROBABILITY:
-        ok = False
-    if ok and code != ROOT:
-        # Brent's bracketing steps by the margin's value: the runs stopped at the exit are
-        # dropped, to be run again in full where it needs them.
-        kept = 0
-        for i in range(n):
-            if pts[_P_SIGN_ONLY, i] == 0.0:
-                pts[_P_X, kept], pts[_P_M, kept] = pts[_P_X, i], pts[_P_M, i]
-                pts[_P_SIGN_ONLY, kept] = 0.0
-                kept += 1
-        n = kept
-        finder_reset(st)
-        x0 = math.log(h_guess) if has_guess and h_guess != 0.0 else 0.0   # 1 m by default
-        horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
-        code, value = brent_start(st, x0, x_min, x_max, x_tol, horizon,
-                                  _or_default(overshoot, 0.05))
-        code, value, n, ok = _drive(code, value, False, row, sc, n_cells, tol_temperature,
-                                    melt_width, pts, n, work, history, info, prefix, st, fpts)
-    res[_R_N] = n
-    res[_R_EVALUATIONS] = n - n_known
-    if not ok:
-        return
-    if code == ROOT:
-        res[_R_X], res[_R_CENSOR], res[_R_HEIGHT] = value, CENSOR_NONE, math.exp(value)
-    elif code == CENSORED_ABOVE:
-        res[_R_X], res[_R_CENSOR], res[_R_HEIGHT] = x_max, CENSOR_ABOVE, h_max
-    elif code == CENSORED_BELOW:
-        res[_R_X], res[_R_CENSOR], res[_R_HEIGHT] = x_min, CENSOR_BELOW, h_min
-    else:
-        return   # no bracket, no convergence: the CPU search raises; hand the scene back
-    res[_R_OK] = 1.0
-
-
-@njit(cache=True)
-def _tighten(row, sc, regime, level, melt_width, old_tol, x_tol, x_min, x_max, h_min, h_max,
-             res, pts, work, history, info, prefix, st, fpts):
-    """The CPU search's ``_tighten``: the search again at the tighter ``x_tol`` from its own
-    root, slopes and simulations (no height simulated twice); adds its simulations to
-    ``res``'s. A censored search stays as it is."""
-    if res[_R_CENSOR] != CENSOR_NONE:
-        return
-    n = int(res[_R_N])
-    slope, go_slope = _history_slopes(pts, n, fpts)
-    for i in range(n):   # the CPU search's history holds heights: ln of them
-        pts[_P_X, i] = math.log(math.exp(pts[_P_X, i]))
-    before = res[_R_EVALUATIONS]
-    _level_search(row, sc, regime, level, melt_width, x_tol, x_min, x_max, h_min, h_max,
-                  math.nan, res[_R_HEIGHT], old_tol, slope, go_slope, math.nan, res, pts, n,
-                  work, history, info, prefix, st, fpts)
-    res[_R_EVALUATIONS] += before
-
-
-@njit(cache=True)
 def exit_regime_code(slide_s, slide_c, omega, t_exit, exit_code):
     """How the scene's heating ends [int]: :data:`REGIME_STOPS_SLIDING`,
     :data:`REGIME_FADING` (a rebound whose sliding speed at the exit, report Eq. 10, is below
@@ -653,8 +404,8 @@ def device_margin(row, x, level, melt_width, melt_spread, melting=True, runaway_
 
 @njit(cache=True)
 def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_fraction,
-                         table, gl_x, gl_w, work, history, fast_work, info, prefix, coarse,
-                         fine, coarse_pts, fine_pts, st, fpts, out):
+                         table, gl_x, gl_w, work, history, fast_work, info, prefix, ps, res,
+                         pts, st, fpts, out):
     """The default full-tier search of one scene (module docstring); results in ``out``.
 
     Parameters
@@ -682,14 +433,9 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
         The record of the search's current run (:func:`_margin`).
     prefix : ndarray, shape (PREFIX_SIZE,)
         The current search's linear prefix (:func:`_margin`).
-    coarse, fine : ndarray, shape (RESULT_SIZE,)
-        The two searches of the pair (the ``_R_*`` layout).
-    coarse_pts, fine_pts : ndarray, shape POINTS_SHAPE
-        Their points (each search's simulations).
-    st : ndarray, shape (1,), dtype :data:`skidmc.solver.finders.FINDER_STATE`
-        The root finder's state.
-    fpts : ndarray, shape (2, SEARCH_POINTS)
-        The root finder's go points (between searches: scratch for a search's history).
+    ps, res, pts, st, fpts : ndarray
+        The search machine's storage (:func:`skidmc.solver.adaptive.new_storage`'s shapes and
+        dtypes).
     out : ndarray, shape (OUT_SIZE,)
         Written (see the ``OUT_*`` layout).
     """
@@ -715,7 +461,6 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     coarse_tol, fine_tol = first_root_tolerances(rtol, level, melt_width, melt_spread, True,
                                                  signs)
     out[OUT_LEVEL] = level
-    x_min, x_max = math.log(h_min), math.log(h_max)
     if not mu > 0.0:
         # No frictional heat, no event: censored above without a simulation ("no_friction").
         out[OUT_HEIGHT], out[OUT_CENSOR] = h_max, CENSOR_ABOVE
@@ -748,113 +493,45 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     _fill_scalars(row, pressure, omega, t_exit, slide_s, slide_c, latent, runaway_fraction,
                   melt_spread, sc)
 
-    coarse_level, fine_level = level - 1.0, level
-    _level_search(row, sc, regime, coarse_level, melt_width, coarse_tol, x_min, x_max, h_min,
-                  h_max, h_fast, math.nan, math.nan, math.nan, math.nan, math.nan, coarse,
-                  coarse_pts, 0, work, history, info, prefix, st, fpts)
-    evaluations = coarse[_R_EVALUATIONS]
-    if coarse[_R_OK] == 0.0:
-        _hand_back(out, _search_failed(sc), evaluations)
+    # The search itself: the machine of skidmc.solver.adaptive, the CPU search's own, answered
+    # with this thread's runs (the mesh built when the level changes, the linear prefix and the
+    # stall cap started anew with each search).
+    horizon = math.log(sc[_S_T_END] / sc[_S_T_EXIT])
+    code, value = pair_start(ps, res, pts, st, fpts, rtol, h_min, h_max, level, melt_width,
+                             coarse_tol, fine_tol, melt_spread, True, signs, regime,
+                             melting_term, False, False, DEVICE_MAX_LEVEL, False, h_fast,
+                             math.nan, horizon, False)
+    built, serial = -1.0, -1
+    n_cells, tol_temperature = 0, 0.0
+    while code == ASK_RUN:
+        s = ps[0]
+        if s.ask_level != built:
+            n_cells, tol_temperature = _build_level(row, sc, s.ask_level, work, history)
+            built = s.ask_level
+        if s.serial != serial:
+            sc[_S_MOST] = 0.0      # the stall cap counts this search's runs (run_cap)
+            sc[_S_PREFIX_H] = 0.0  # and its first run records its linear prefix
+            serial = s.serial
+        m, event = _margin(value, row, sc, n_cells, tol_temperature, s.ask_width,
+                           s.ask_until_exit == 1, work, history, info, prefix)
+        code, value = pair_step(ps, res, pts, st, fpts, m, event)
+    s = ps[0]
+    if code == HAND_BACK:
+        reason = _search_failed(sc)
+        if s.reason == BACK_NARROW:
+            reason = HANDBACK_NARROW   # the CPU search narrows the width, measuring its bias
+        elif s.reason == BACK_LEVEL:
+            reason = HANDBACK_LEVEL    # beyond this thread's arrays
+        _hand_back(out, reason, s.evaluations)
         return
-    # The fine search (the CPU search's _fine_search): from the coarse root, the fine root's
-    # measured place above it (skidmc.solver.plan: EXACT_FINE_SHIFT with its spread where the
-    # root is located by signs, EXACT_STEADY_FINE_OVERSHOOT on steady rebounds), the coarse
-    # search's slopes.
-    coarse_error = modelled_error(coarse_level)
-    overshoot = (2.0 * EXACT_FINE_SHIFT if signs else EXACT_STEADY_FINE_OVERSHOOT) * coarse_error
-    slope, go_slope = _history_slopes(coarse_pts, int(coarse[_R_N]), fpts)
-    h_guess = coarse[_R_HEIGHT] if coarse[_R_CENSOR] == CENSOR_NONE else math.nan
-    _level_search(row, sc, regime, fine_level, melt_width, fine_tol, x_min, x_max, h_min, h_max,
-                  h_fast, h_guess, overshoot, slope, go_slope,
-                  EXACT_FINE_SHIFT_SPREAD * coarse_error + 0.5 * coarse_tol, fine, fine_pts, 0,
-                  work, history, info, prefix, st, fpts)
-    evaluations += fine[_R_EVALUATIONS]
-    if fine[_R_OK] == 0.0:
-        _hand_back(out, _search_failed(sc), evaluations)
-        return
-    melt_bias = MELT_WIDTH_BIAS_PER_K * melt_width if melting_term else 0.0
-    if coarse[_R_CENSOR] != CENSOR_NONE or fine[_R_CENSOR] != CENSOR_NONE:
-        # As the CPU search: the fine search's result (its bound when censored, else its
-        # own root, not extrapolated) with the calibrated estimate of its level.
-        out[OUT_CENSOR] = fine[_R_CENSOR]
-        out[OUT_HEIGHT] = fine[_R_HEIGHT]
-        width_bias = (melt_bias if melt_width > melt_width_floor(fine_level) * (1.0 + 1e-9)
-                      else 0.0)
-        out[OUT_ERROR] = modelled_error(fine_level) + fine_tol + width_bias
-        out[OUT_EVALUATIONS] = evaluations
-        return
-
-    # The adaptive rounds: the CPU search's rule (skidmc.solver.controller), on the exact
-    # target with the width never narrowed here.
-    for round_ in range(MAX_ADAPTIVE_ROUNDS + 1):
-        height, relative = richardson_value(coarse[_R_HEIGHT], fine[_R_HEIGHT])
-        pair, estimate = pair_estimate(relative, coarse_level, melt_spread, True, signs,
-                                       melt_bias, coarse_tol, fine_tol)
-        if round_ == MAX_ADAPTIVE_ROUNDS:
-            break
-        action, next_coarse_tol, next_fine_tol, value = next_round(
-            rtol, estimate, pair, melt_bias, relative, height, coarse_level, coarse_tol,
-            fine_tol, melt_width, 0, melt_spread, True, signs)
-        if action == DONE:
-            break
-        if action == TIGHTEN_FINE or action == TIGHTEN_BOTH:
-            # Tighten the roots, each from its own root, slopes and simulations.
-            before = coarse[_R_EVALUATIONS] + fine[_R_EVALUATIONS]
-            if action == TIGHTEN_BOTH:
-                _tighten(row, sc, regime, coarse_level, melt_width, coarse_tol, next_coarse_tol,
-                         x_min, x_max, h_min, h_max, coarse, coarse_pts, work, history, info,
-                         prefix, st, fpts)
-            if coarse[_R_OK] == 1.0:
-                _tighten(row, sc, regime, fine_level, melt_width, fine_tol, next_fine_tol, x_min,
-                         x_max, h_min, h_max, fine, fine_pts, work, history, info, prefix, st,
-                         fpts)
-            evaluations += coarse[_R_EVALUATIONS] + fine[_R_EVALUATIONS] - before
-            if coarse[_R_OK] == 0.0 or fine[_R_OK] == 0.0:
-                _hand_back(out, _search_failed(sc), evaluations)
-                return
-        elif action == NARROW:
-            # The CPU search narrows the melting width, measuring its bias with an extra
-            # simulation.
-            _hand_back(out, HANDBACK_NARROW, evaluations)
-            return
-        elif action == REFINE and fine_level + 1.0 > DEVICE_MAX_LEVEL:
-            # Beyond this thread's arrays.
-            _hand_back(out, HANDBACK_LEVEL, evaluations)
-            return
-        elif action == REFINE:
-            # The next level's root predicted from this pair (value [m]); the pair moves up,
-            # the new fine search starting from there with the old fine search's slopes.
-            for k in range(RESULT_SIZE):
-                coarse[k] = fine[k]
-            for k in range(int(fine[_R_N])):
-                for r in range(POINTS_SHAPE[0]):
-                    coarse_pts[r, k] = fine_pts[r, k]
-            slope, go_slope = _history_slopes(coarse_pts, int(coarse[_R_N]), fpts)
-            _level_search(row, sc, regime, fine_level + 1.0, melt_width, next_fine_tol, x_min,
-                          x_max, h_min, h_max, h_fast, value,
-                          0.5 * abs(relative) + next_fine_tol, slope, go_slope, math.nan, fine,
-                          fine_pts, 0, work, history, info, prefix, st, fpts)
-            evaluations += fine[_R_EVALUATIONS]
-            coarse_level, fine_level = fine_level, fine_level + 1.0
-            if fine[_R_OK] == 0.0 or fine[_R_CENSOR] != CENSOR_NONE:
-                _hand_back(out, _search_failed(sc), evaluations)
-                return
-        else:   # STOP
-            break
-        coarse_tol, fine_tol = next_coarse_tol, next_fine_tol
-    out[OUT_HEIGHT] = height
-    out[OUT_CENSOR] = CENSOR_NONE
-    # As the CPU search (search._censor_beyond_bounds): an extrapolation beyond a bound is
-    # censored there.
-    if height >= h_max:
-        out[OUT_HEIGHT], out[OUT_CENSOR] = h_max, CENSOR_ABOVE
-    elif height <= h_min:
-        out[OUT_HEIGHT], out[OUT_CENSOR] = h_min, CENSOR_BELOW
-    out[OUT_ERROR] = estimate
-    out[OUT_EVALUATIONS] = evaluations
-    out[OUT_LEVEL] = fine_level
-    out[OUT_CORRECTION] = relative
-    out[OUT_MELT_BIAS] = melt_bias
+    out[OUT_HEIGHT] = s.out_height
+    out[OUT_CENSOR] = s.out_censor
+    out[OUT_ERROR] = s.out_error
+    out[OUT_EVALUATIONS] = s.evaluations
+    out[OUT_LEVEL] = s.out_level
+    if s.extrapolated == 1:
+        out[OUT_CORRECTION] = s.relative
+        out[OUT_MELT_BIAS] = s.melt_bias
 
 
 @njit(cache=True, parallel=True)
@@ -868,13 +545,12 @@ def critical_heights_cpu(rows, rtol, h_min, h_max, melt_spread, melting, runaway
         fast_work = np.empty((3, N_TIMES))
         info = np.empty(1, dtype=KERNEL_RUN)   # every field written before it is read
         prefix = np.empty(PREFIX_SIZE)         # written by each search's first run
-        coarse = np.empty(RESULT_SIZE)
-        fine = np.empty(RESULT_SIZE)
-        coarse_pts = np.empty(POINTS_SHAPE)
-        fine_pts = np.empty(POINTS_SHAPE)
+        ps = np.empty(1, dtype=PAIR_STATE)     # every field written before it is read
+        res = np.empty((2, RESULT_SIZE))
+        pts = np.empty((2,) + POINTS_SHAPE)
         st = np.empty(1, dtype=FINDER_STATE)   # finder_reset before every use
         fpts = np.empty((2, SEARCH_POINTS))
         critical_height_core(rows[i], rtol, h_min, h_max, melt_spread, melting,
                              runaway_fraction, table, gl_x, gl_w, work, history, fast_work,
-                             info, prefix, coarse, fine, coarse_pts, fine_pts, st, fpts,
+                             info, prefix, ps, res, pts, st, fpts,
                              out[i])

@@ -60,6 +60,7 @@ __all__ = [
     "PRIOR_TAIL_Z",
     "ROOT",
     "SIGN_ERROR",
+    "bisection_start",
     "brent_start",
     "finder_point",
     "finder_reset",
@@ -144,7 +145,7 @@ ASK, ROOT, GIVE_UP, CENSORED_ABOVE, CENSORED_BELOW = 0, 1, 2, 3, 4
 NO_BRACKET, NO_CONVERGENCE, SIGN_ERROR, BAD_PROBABILITY = 5, 6, 7, 8
 
 # Which finder the state is running.
-_GO_SIDE, _GUIDED, _PRIOR, _BRACKET, _BRENT = range(5)
+_GO_SIDE, _GUIDED, _PRIOR, _BRACKET, _BRENT, _BISECTION = range(6)
 
 #: One finder's whole state (a record; the go points of :func:`go_side_start` live in the
 #: caller's (2, n) array ``pts``, sorted by x). ``lo`` is the highest no-go point seen
@@ -805,6 +806,45 @@ def history_slopes(heights, margins, n):
     return slope, go_slope
 
 
+# ------------------------------------------------------------ the report's bisection
+
+
+@njit(cache=True)
+def bisection_start(st, x_min, x_max, x_tol):
+    """The report's search: geometric bisection on go / no-go between the bounds.
+
+    The margin at ``x_max`` first (no-go there: :data:`CENSORED_ABOVE`), then at ``x_min`` (go
+    there: :data:`CENSORED_BELOW`); then the bracket is halved in ln H until at most ``x_tol``
+    wide, and its midpoint is the root (the geometric mean of the lowest go and the highest
+    no-go height)."""
+    s = st[0]
+    s.mode = _BISECTION
+    s.x_min, s.x_max, s.x_tol = x_min, x_max, x_tol
+    s.count = 0   # 0: x_max asked, 1: x_min asked, 2: halving
+    return _ask(s, x_max)
+
+
+@njit(cache=True)
+def _bisection_tell(s, m):
+    if s.count == 0:
+        if m > 0.0:
+            return CENSORED_ABOVE, s.x_max
+        s.count = 1
+        return _ask(s, s.x_min)
+    if s.count == 1:
+        if m <= 0.0:
+            return CENSORED_BELOW, s.x_min
+        s.count = 2
+        s.lo_x, s.hi_x = s.x_min, s.x_max
+    elif m <= 0.0:
+        s.hi_x = s.x
+    else:
+        s.lo_x = s.x
+    if s.hi_x - s.lo_x > s.x_tol:
+        return _ask(s, 0.5 * (s.lo_x + s.hi_x))
+    return ROOT, 0.5 * (s.lo_x + s.hi_x)
+
+
 # --------------------------------------------------------------------------------- driving
 
 
@@ -823,4 +863,6 @@ def finder_step(st, pts, m):
         return _prior_tell(s, pts, m)
     if mode == _BRACKET:
         return _bracket_tell(s, m)
+    if mode == _BISECTION:
+        return _bisection_tell(s, m)
     return _brent_tell(s, m)

@@ -175,19 +175,17 @@ def prior_bisection_root(margin, x_guess, sigma, x_tol, x_min, x_max,
 
 
 def bisection_root(margin, x_min, x_max, x_tol):
-    """The report's search: geometric mean of the lowest go and the highest no-go."""
-    if margin(x_max) > 0.0:
+    """The report's search: geometric mean of the lowest go and the highest no-go
+    (:func:`skidmc.solver.finders.bisection_start`, driven by ``margin``). Returns
+    (x_root, censored), censored "above", "below" or None."""
+    st, pts = _state((), 0)
+    code, value = finders.bisection_start(st, float(x_min), float(x_max), float(x_tol))
+    code, value = _drive(margin, st, pts, code, value)
+    if code == CENSORED_ABOVE:
         return x_max, "above"
-    if margin(x_min) <= 0.0:
+    if code == CENSORED_BELOW:
         return x_min, "below"
-    lo, hi = x_min, x_max
-    while hi - lo > x_tol:
-        mid = 0.5 * (lo + hi)
-        if margin(mid) <= 0.0:
-            hi = mid
-        else:
-            lo = mid
-    return 0.5 * (lo + hi), None
+    return value, None
 
 
 def brent_root(margin, x_min, x_max, x_tol, horizon, h_guess, overshoot=0.05):

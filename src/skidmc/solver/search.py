@@ -23,18 +23,25 @@ import time
 
 from skidmc.errors import SceneError, SkidmcError
 from skidmc.scene.scenes import Scene
-from skidmc.solver.controller import (
-    DONE,
-    MAX_ADAPTIVE_ROUNDS,
-    NARROW,
-    REFINE,
-    TIGHTEN_BOTH,
-    TIGHTEN_FINE,
-    first_root_tolerances,
-    next_round,
-    pair_estimate,
-    richardson_value,
+from skidmc.solver import adaptive
+from skidmc.solver.adaptive import (
+    ASK_RUN,
+    COARSE_GAP,
+    FADING_FAST_SHIFT,
+    FADING_FAST_SPREAD,
+    FAST_STOPS_SLIDING_SPREAD,
+    FINE_SHIFT_SPREAD,
+    FINISHED,
+    MELT_SHIFT_FACTOR,
+    P_M,
+    P_X,
+    R_HEIGHT,
+    R_N,
+    REGIME_FADING,
+    REGIME_STEADY,
+    REGIME_STOPS_SLIDING,
 )
+from skidmc.solver.controller import MAX_ADAPTIVE_ROUNDS, first_root_tolerances, richardson_value
 from skidmc.solver.model import (
     build_model,
     constant_property_scene,
@@ -56,14 +63,12 @@ from skidmc.solver.plan import (
     EXACT_STEADY_FINE_OVERSHOOT,
     extrapolated_error,
     melt_bias,
-    melt_bias_bound,
     modelled_error,
     root_tolerance,
 )
 from skidmc.solver.results import HeightResult, flag_unmet_rtol
 from skidmc.solver.roots import (
     FAST_GUESS_ERROR,
-    FOLD_SLOPE,
     JUMP_SLOPE,
     bisection_root,
     brent_root,
@@ -81,53 +86,10 @@ __all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "FADING_EXIT_SPEED",
            "MELT_SHIFT_FACTOR", "TARGETS", "TIERS", "SceneUnsolvable", "SearchOptions",
            "critical_height"]
 
-#: The melting width's bias b(w) on the critical height [1] from the root's shift dx when the
-#: width is doubled: b(w) = 1.3-1.9 dx on the report presets (concave, first order in w); 2.5
-#: bounds it with 30 % to spare (:func:`_melt_width_bias`).
-MELT_SHIFT_FACTOR = 2.5
-
 #: Model fidelity tiers: "full" (the report's model, converged to rtol) and "fast" (the
 #: reduced model of :mod:`skidmc.solver.fast`, ~10-20 us per height, a few percent off the full
 #: model).
 TIERS = ("full", "fast")
-
-#: Scatter of the fast tier's ln H about the full model's where sliding stops [1], the prior's
-#: spread of a stops-sliding search from the fast tier's height
-#: (:func:`skidmc.solver.roots.prior_bisection_root`): sd 0.016 on the training scenes of
-#: scripts/fast_tier_error.py after :data:`skidmc.physics.fast.STOPS_SLIDING_FACTOR`,
-#: rounded up. A guess further off costs doubling steps, never a wrong root.
-FAST_STOPS_SLIDING_SPREAD = 0.02
-
-#: Shift [1, in ln H] of the root's prior above the fast tier's height on rebound scenes whose
-#: heating fades before the exit (sliding speed at rebound below :data:`FADING_EXIT_SPEED` of the
-#: initial one), and the prior's spread: there the fast tier's height is low. The level-0.5 root
-#: (melting width 1 K, spread 1) measured against it on the rebound scenes of
-#: ``scripts/fast_tier_error.py``'s sets with an exit speed ratio below 0.5: training set
-#: ln(H / H_fast) mean +0.038, sd 0.016 (25 scenes); test set +0.044, sd 0.014 (34 scenes)
-#: (+0.032 to +0.052 on the fading scenes of ``skidmc.scene.validation``); at ratios 0.5-0.6
-#: +0.016 to +0.025, above 0.6 -0.013 to -0.001. Fitted on the training set (mean rounded,
-#: spread rounded up as for :data:`FAST_STOPS_SLIDING_SPREAD`). A guess further off costs
-#: doubling steps, never a wrong root.
-FADING_FAST_SHIFT = 0.04
-FADING_FAST_SPREAD = 0.02
-
-#: Spread of the fine root's prior in a Richardson pair whose margin jumps, as a fraction of the
-#: coarse level's modelled error [1] (:func:`_fine_search`; the coarse root's own tolerance is
-#: added). The fine root lies 0.375 of that error above the coarse root on average: measured
-#: with tight roots, melting width 1 K and spread 1, 0.27-0.44 (sd ~0.04) for the pair
-#: (0.5, 1.5) and 0.31-0.48 for (0, 1) on the 20 scenes of seeds 16 and 17 of
-#: ``skidmc.scene.validation`` whose margin is likely to jump. 0.06 puts the farthest of them
-#: 1.75 spreads out; it was 0.125 (a sixth of 0.75). On a held-out draw (seed 18, 14 such
-#: scenes): 0.27-0.39 and 0.31-0.46 (``tests/test_root_tolerance.py``). At rtol 1e-3 it saves
-#: one fine simulation on 9 of those 20 scenes. A root farther out costs doubling steps, never
-#: a wrong root.
-FINE_SHIFT_SPREAD = 0.06
-
-#: Coarse-to-fine search: at level L >= COARSE_GAP, the critical height is first found at level
-#: L - COARSE_GAP (each simulation ~10x cheaper), and the search at level L starts there with a
-#: bracket a few coarse errors wide, so it needs ~4 fine simulations instead of ~8.
-COARSE_GAP = 2.0
-
 
 class SceneUnsolvable(SolverError, SkidmcError):
     """The solver could not finish a scene that passed validation (a time integration that
@@ -303,130 +265,86 @@ def _fine_search(scene, opts, level, x_tol, coarse, coarse_tol):
                    slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history))
 
 
+_REGIME_CODES = {"steady": REGIME_STEADY, "fading": REGIME_FADING,
+                 "stops_sliding": REGIME_STOPS_SLIDING}
+_CENSOR_NAMES = {0: None, 1: "above", 2: "below"}   # skidmc.physics.fast.CENSOR_*
+
+
 def _adaptive_pair(scene, opts, h_guess, start):
     """The default search: a Richardson pair whose own estimate is brought within ``rtol``.
 
-    The first pair ``(level - 1, level)`` gets the root tolerances
-    :func:`skidmc.solver.controller.first_root_tolerances` (the room its estimate is likely to
-    leave). Its estimate is then measured (:func:`_adaptive_value`: the a posteriori error of
-    the correction, the melting width's bias, and the root errors the tolerances used allow).
-    While it exceeds rtol, :func:`skidmc.solver.controller.next_round` (the rule the device
-    search runs too) picks the cheapest fix the measured parts say will do: tighten the roots
-    (each re-search starting from its own root and reusing its simulations), search the pair
-    again with a narrower melting width (measuring its bias anew), or move the pair up a level
-    (its next fine root predicted from the pair), until the estimate meets rtol or nothing
-    left can help: then the estimate stays above rtol and says so.
+    The search is the compiled machine of :mod:`skidmc.solver.adaptive` (the one the device
+    search drives too): the first pair ``(level - 1, level)`` with the root tolerances
+    :func:`skidmc.solver.controller.first_root_tolerances`, its estimate measured (the a
+    posteriori error of the correction, the melting width's bias, and the root errors the
+    tolerances allow), then the rounds of :func:`skidmc.solver.controller.next_round` (tighten
+    the roots from their own simulations, search the pair again with a narrower melting width,
+    or move the pair up a level) until the estimate meets rtol or nothing left can help: then
+    the estimate stays above rtol and says so. This function only answers the machine's
+    questions: each run it asks for is :func:`skidmc.solver.simulate.simulate` on the model of
+    its level and melting width, the runs of one search sharing a :class:`LinearPrefix`.
     """
     rtol = opts.rtol
     coarse_tol, fine_tol = first_root_tolerances(rtol, opts.level, opts.melt_width,
                                                  opts.melt_spread, opts.exact, opts.signs)
-    coarse = _search(scene, opts, opts.level - 1.0, coarse_tol, h_guess=h_guess)
-    fine = _fine_search(scene, opts, opts.level, fine_tol, coarse, coarse_tol)
-    evaluations = coarse.evaluations + fine.evaluations
-    melt, extra = _melt_width_bias(scene, coarse, opts)
-    evaluations += extra
-    res, pair = _adaptive_value(coarse, fine, opts, coarse_tol, fine_tol, melt)
-    narrowed = 0
-    for _ in range(MAX_ADAPTIVE_ROUNDS):
-        if not res.extrapolated:
-            break
-        action, next_coarse_tol, next_fine_tol, value = next_round(
-            rtol, res.error_estimate, pair, res.melt_bias_estimate, res.richardson_correction,
-            res.critical_height, coarse.level, coarse_tol, fine_tol, opts.melt_width, narrowed,
-            opts.melt_spread, opts.exact, opts.signs)
-        if action == DONE:
-            break
-        if action == TIGHTEN_FINE:
-            fine, n = _tighten(scene, opts, fine, fine_tol, next_fine_tol)
-            evaluations += n
-        elif action == TIGHTEN_BOTH:
-            coarse, n = _tighten(scene, opts, coarse, coarse_tol, next_coarse_tol)
-            fine, m = _tighten(scene, opts, fine, fine_tol, next_fine_tol)
-            evaluations += n + m
-        elif action == NARROW:
-            # Search the pair again at the new width (from the old root), measuring its bias
-            # anew.
-            opts = opts.with_melt_width(value)
-            narrowed += 1
-            coarse = _search(scene, opts, coarse.level, next_coarse_tol,
-                             h_guess=coarse.critical_height,
-                             overshoot=2.0 * res.melt_bias_estimate + next_coarse_tol,
-                             slope=margin_slope(coarse.history),
-                             go_slope=go_side_slope(coarse.history))
-            fine = _fine_search(scene, opts, fine.level, next_fine_tol, coarse, next_coarse_tol)
-            melt, extra = _melt_width_bias(scene, coarse, opts)
-            evaluations += coarse.evaluations + fine.evaluations + extra
-        elif action == REFINE:
-            # value: the next level's root predicted from this pair [m].
-            finer = _search(scene, opts, fine.level + 1.0, next_fine_tol, h_guess=value,
-                            overshoot=0.5 * abs(res.richardson_correction) + next_fine_tol,
-                            slope=margin_slope(fine.history),
-                            go_slope=go_side_slope(fine.history))
-            evaluations += finer.evaluations
-            coarse, fine = fine, finer
-        else:   # STOP: nothing left that can help
-            break
-        coarse_tol, fine_tol = next_coarse_tol, next_fine_tol
-        res, pair = _adaptive_value(coarse, fine, opts, coarse_tol, fine_tol, melt)
-    res = _censor_beyond_bounds(res, opts.h_min, opts.h_max)
-    res.evaluations = evaluations
-    res.wall_time = time.perf_counter() - start
-    return res
+    kwargs = dict(melting=opts.melting, melt_spread=opts.melt_spread, target=opts.target,
+                  rtol=rtol, **opts.model_kwargs())
+    probe = build_model(scene, level=opts.level - 1.0, meshes=False, **kwargs)
+    melting_term = "melting" in probe.terms
+    # The melting width's bias is measured where the calibrated bound does not apply: scenes
+    # that ignite below the melting point (the bound was measured on scenes igniting above it:
+    # the presets, ~47 K above; a level-0 shift overstates the bias there, 3.5x on
+    # paper-quartz; below it the runaway starts where the smoothed step releases its latent
+    # heat, and the bias is the scene's own, 15x the bound at E/R = 15,000 K with a fast
+    # prefactor).
+    measure_bias = melting_term and build_model(
+        scene, level=opts.level - 1.0, melting=opts.melting,
+        meshes=False).ignition_temperature < scene.he_melting_point
+    fast = None if h_guess is not None else _fast_guess(scene, opts.h_min, opts.h_max,
+                                                        opts.melting)
+    ps, res, pts, st, fpts = adaptive.new_storage()
+    code, x = adaptive.pair_start(
+        ps, res, pts, st, fpts, rtol, opts.h_min, opts.h_max, opts.level, opts.melt_width,
+        coarse_tol, fine_tol, opts.melt_spread, opts.exact, opts.signs,
+        _REGIME_CODES[exit_regime(scene)], melting_term, measure_bias, True, math.inf,
+        "no_friction" in probe.flags, math.nan if fast is None else fast,
+        math.nan if h_guess is None else float(h_guess),
+        math.log(probe.end_time / probe.exit_time), opts.method == "bisection")
+    models, prefix, serial = {}, None, -1
 
+    def model_of(level, width):
+        key = (level, width)
+        if key not in models:
+            models[key] = build_model(scene, level=level, melt_width=width, **kwargs)
+        return models[key]
 
-def _tighten(scene, opts, search, old_tol, tol):
-    """``search`` again at the tighter root tolerance ``tol`` [1], from its own root.
-
-    The root lies within ``old_tol`` of the old one: the new search starts there, with the old
-    search's slopes and simulations (no height is simulated twice). Returns the new search and
-    the simulations it added.
-    """
-    if search.censored is not None:
-        return search, 0
-    new = _search(scene, opts, search.level, tol, h_guess=search.critical_height,
-                  overshoot=old_tol, slope=margin_slope(search.history),
-                  go_slope=go_side_slope(search.history), known=search.history)
-    added = new.evaluations
-    new.evaluations += search.evaluations
-    return new, added
-
-
-def _melt_width_bias(scene, coarse, opts):
-    """Measured bias of the melting step's width on ln H [1], and the simulations it took.
-
-    Only for scenes whose ignition temperature (:attr:`SkidModel.ignition_temperature`) lies
-    below the melting point, where the calibrated bound does not apply.
-
-    One simulation at the coarse level with the width doubled, at the coarse search's go point
-    closest to its root: the margin's change over the go side's slope is the root's shift
-    dx from w to 2w. The bias is close to first order in w and concave (quartz: b(2 K) = 1.9 x
-    (b(4 K) - b(2 K)), b(1 K) = 1.3 x (b(2 K) - b(1 K)); results/validation/melt_width_bias.md),
-    so b(w) ~ dx; :data:`MELT_SHIFT_FACTOR` |dx| bounds it. Returns (None, 0) without melting
-    or where no smooth go side is known (a margin that jumps or folds at the root: there the
-    calibrated bound alone is used).
-    """
-    if coarse.censored is not None or "melting" not in coarse.terms:
-        return None, 0
-    if not build_model(scene, level=coarse.level, melting=opts.melting,
-                       meshes=False).ignition_temperature < scene.he_melting_point:
-        # The calibrated bound was measured on scenes that ignite above the melting point
-        # (the presets: T_ign ~600 K, 47 K above it); there it holds, and a level-0 shift
-        # overstates the bias (3.5x on paper-quartz). Below it, the runaway starts where the
-        # smoothed step releases its latent heat, and the bias is the scene's own (15x the
-        # bound at E/R = 15,000 K with a fast prefactor).
-        return None, 0
-    slope = go_side_slope(coarse.history)
-    go = [(h, m) for h, m in coarse.history if math.isfinite(m) and m <= 0.0]
-    if slope is None or slope < -FOLD_SLOPE or not go:
-        return None, 0
-    height, m_go = go[0]
-    model = build_model(scene, level=coarse.level, melting=opts.melting,
-                        melt_width=2.0 * opts.melt_width, melt_spread=opts.melt_spread,
-                        target=opts.target, rtol=coarse.rtol, **opts.model_kwargs())
-    m_wide = simulate(model, height).margin
-    if not math.isfinite(m_wide):
-        return None, 1
-    return MELT_SHIFT_FACTOR * abs(m_wide - m_go) / -slope, 1
+    while code == ASK_RUN:
+        level, width, until_exit, alone, ask_serial = adaptive.asked(ps)
+        model = model_of(level, width)
+        if not alone and ask_serial != serial:
+            prefix, serial = LinearPrefix(model), ask_serial   # a new search
+        sim = simulate(model, math.exp(x), until_exit=until_exit,
+                       prefix=None if alone else prefix)
+        code, x = adaptive.pair_step(ps, res, pts, st, fpts, sim.margin, sim.event)
+    if code != FINISHED:   # pragma: no cover - a CPU run raises instead of failing quietly
+        raise SolverError(f"the search ended without a root (reason {int(ps[0]['reason'])})")
+    (height, censor, estimate, level, extrapolated, correction, melt_bias,
+     evaluations) = adaptive.outcome(ps)
+    # The fine search's history, flags and model (its own height's flags, as _search gives).
+    model = model_of(level, float(ps[0]["melt_width"]))
+    n = int(res[1, R_N])
+    history = sorted((math.exp(float(x)), float(m))
+                     for x, m in zip(pts[1, P_X, :n], pts[1, P_M, :n]))
+    flags = model.flags
+    if "no_friction" not in model.flags:
+        flags = flags + model.height_flags(float(res[1, R_HEIGHT]))
+    return HeightResult(
+        critical_height=float(height), censored=_CENSOR_NAMES[int(censor)],
+        evaluations=int(evaluations), flags=flags, error_estimate=float(estimate), rtol=rtol,
+        level=float(level), method=opts.method, exit_time=model.exit_time,
+        exit_kind=model.exit_kind, terms=model.terms, extrapolated=bool(extrapolated),
+        richardson_correction=float(correction), melt_bias_estimate=float(melt_bias),
+        history=history, wall_time=time.perf_counter() - start)
 
 
 def _censor_beyond_bounds(res, h_min, h_max):
@@ -466,27 +384,8 @@ def _richardson(coarse, fine, opts, x_tol):
     return res
 
 
-def _adaptive_value(coarse, fine, opts, coarse_tol, fine_tol, melt):
-    """The Richardson value of the default search's pair and its a posteriori part [1].
-
-    Its ``error_estimate`` [1] is measured on the pair
-    (:func:`skidmc.solver.controller.pair_estimate`): the a posteriori error of its correction,
-    plus the melting width's bias (the bound, or ``melt`` measured on the scene when larger)
-    and the root errors its searches' tolerances allow.
-    """
-    res, extrapolated = _pair_value(coarse, fine)
-    if not extrapolated:
-        return res, 0.0
-    # The width's bias: the calibrated bound, or what this scene measured if larger.
-    res.melt_bias_estimate = max(melt_bias_bound(fine.terms, opts.melt_width), melt or 0.0)
-    pair, res.error_estimate = pair_estimate(res.richardson_correction, coarse.level,
-                                             opts.melt_spread, opts.exact, opts.signs,
-                                             res.melt_bias_estimate, coarse_tol, fine_tol)
-    return res, pair
-
-
 def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, overshoot=None, slope=None,
-            go_slope=None, known=(), guess_sigma=None):
+            go_slope=None, guess_sigma=None):
     """One critical-height search at one resolution level (see :func:`critical_height`).
 
     ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
@@ -495,9 +394,9 @@ def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, overshoot=No
     (:func:`~skidmc.solver.roots.go_side_root`, 1-3 simulations); where sliding stops, the
     root's prior is bisected (:func:`~skidmc.solver.roots.prior_bisection_root`; its spread is
     ``guess_sigma`` [1, in ln H] when given). Otherwise bracketing and Brent's method take
-    over, reusing every simulation done. ``known``: (H [m], margin) already simulated with
-    this search's model (a search repeated at a tighter tolerance): reused, and counted only
-    in the earlier search's evaluations.
+    over, reusing every simulation done. The default search does not come here: its searches
+    are the compiled machine's (:func:`_adaptive_pair`); this is the search of the fixed plans
+    (a forced level or model, no extrapolation, the report's bisection).
     """
     rtol, method, h_min, h_max = opts.rtol, opts.method, opts.h_min, opts.h_max
     own_model = model is None
@@ -531,9 +430,7 @@ def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, overshoot=No
         if fast is not None:
             h_guess, overshoot, from_fast_tier = fast, FAST_GUESS_ERROR, True
 
-    cache = {math.log(h): m for h, m in known}
-    n_known = len(cache)
-    points = [(x, m) for x, m in cache.items() if math.isfinite(m)]
+    cache = {}
     # A margin that jumped at the root of the search the guess came from (a coarser level, or
     # this one at a looser tolerance) is searched by its signs (prior_bisection_root): its
     # go side says nothing about where the jump lies.
@@ -567,7 +464,7 @@ def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, overshoot=No
         x_root, censored = bisection_root(margin, x_min, x_max, x_tol)
     elif h_guess is not None and model.exit_kind == "rebound" and not (jumped or fading):
         x_root = go_side_root(margin, math.log(h_guess), go_slope, x_tol, x_min, x_max,
-                               guess_error=overshoot or FAST_GUESS_ERROR, points=points)
+                               guess_error=overshoot or FAST_GUESS_ERROR)
         censored = None
     elif h_guess is not None:
         # Sliding stops before rebound, or the guess's search saw the margin jump at its root
@@ -585,9 +482,8 @@ def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, overshoot=No
         else:
             spread = 0.5 * (overshoot or FAST_GUESS_ERROR)
             center, sigma = math.log(h_guess) + spread, guess_sigma or spread / 3.0
-        known_signs = [(x, m) for x, m in cache.items() if m == math.inf] if signs_only else []
         x_root, censored = prior_bisection_root(margin, center, sigma, x_tol, x_min, x_max,
-                                                slope=slope, points=points + known_signs,
+                                                slope=slope,
                                                 signs_only=signs_only), None
     if x_root is None:
         # Brent's bracketing steps by the margin's value: the sign-only runs are done again in
@@ -604,7 +500,7 @@ def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, overshoot=No
     # Validity at the height found (indentation depth, sliding distance): skidmc.solver.model.
     base["flags"] = model.flags + model.height_flags(height)
     return HeightResult(critical_height=height, censored=censored,
-                        evaluations=len(cache) - n_known + coarse_evaluations, history=history,
+                        evaluations=len(cache) + coarse_evaluations, history=history,
                         **base)
 
 
