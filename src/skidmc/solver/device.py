@@ -76,8 +76,6 @@ from skidmc.physics.meshes import fill_meshes
 from skidmc.physics.records import HISTORY_ROWS, KERNEL_RUN, STATE_ROWS
 from skidmc.physics.thermal import (
     _PX_VALID,
-    PREFIX_MAX_SCALE,
-    PREFIX_RESUME,
     PREFIX_WRITE,
     SIGN_COMMIT_FRACTION,
     prefix_size,
@@ -115,7 +113,7 @@ from skidmc.solver.plan import (
     melt_width_for_rtol,
     modelled_error,
 )
-from skidmc.solver.simulate import run_cap
+from skidmc.solver.simulate import prefix_mode, run_cap
 
 __all__ = [
     "DEVICE_HISTORY",
@@ -251,14 +249,7 @@ def _margin(x, row, sc, n_cells, tol_temperature, melt_width, until_exit, work, 
     cap = run_cap(tol_temperature, sc[_S_MOST])
     height = math.exp(x)
     q0 = sc[_S_FLUX] * math.sqrt(height)
-    mode = 0
-    if prefix.shape[0] > 0:
-        if sc[_S_PREFIX_H] == 0.0:
-            mode = PREFIX_WRITE
-        else:
-            scale = math.sqrt(height / sc[_S_PREFIX_H])
-            if 1.0 / PREFIX_MAX_SCALE <= scale <= PREFIX_MAX_SCALE:
-                mode = PREFIX_RESUME
+    mode = prefix_mode(height, sc[_S_PREFIX_H]) if prefix.shape[0] > 0 else 0
     run = info[0]
     inp = run.input
     inp.n = n_cells

@@ -23,7 +23,7 @@ from skidmc.solver.model import BASE_RESOLUTION
 
 __all__ = ["MAX_STEPS", "STALL_ATTEMPTS_LEVEL0", "STALL_FACTOR", "STALL_FLOOR",
            "STALL_FLOOR_LEVEL0", "LinearPrefix", "Simulation", "SolverError", "kernel_arguments",
-           "run_cap", "simulate", "stall_cap", "step_cap"]
+           "prefix_mode", "run_cap", "simulate", "stall_cap", "step_cap"]
 
 #: Most step attempts (accepted + rejected) of any run [1]: the cap of a run at level 4 and
 #: above, and of a caller that names no model's level.
@@ -113,11 +113,24 @@ class LinearPrefix:
         self.most_attempts = 0        # the most step attempts of a run given it (stall_cap)
 
     def mode(self, height):
-        """The kernel's ``prefix_mode`` for a run at ``height`` [m]."""
-        if self.recorded_height is None:
-            return PREFIX_WRITE
-        scale = math.sqrt(height / self.recorded_height)
-        return PREFIX_RESUME if 1.0 / PREFIX_MAX_SCALE <= scale <= PREFIX_MAX_SCALE else 0
+        """The kernel's ``prefix_mode`` for a run at ``height`` [m] (:func:`prefix_mode`)."""
+        recorded = 0.0 if self.recorded_height is None else self.recorded_height
+        return int(prefix_mode(float(height), recorded))
+
+
+@njit(cache=True)
+def prefix_mode(height, recorded_height):
+    """The kernel's ``prefix_mode`` for a run at ``height`` [m] of a search whose linear prefix
+    was recorded by the run at ``recorded_height`` [m] (0: not yet): record it
+    (:data:`~skidmc.physics.thermal.PREFIX_WRITE`), resume from it where the flux amplitudes'
+    ratio sqrt(H / H_rec) lies within :data:`~skidmc.physics.thermal.PREFIX_MAX_SCALE`
+    (:data:`~skidmc.physics.thermal.PREFIX_RESUME`), else neither (0). Compiled: the CPU
+    search (:class:`LinearPrefix`) and the device search (:mod:`skidmc.solver.device`) apply
+    one text of the rule."""
+    if recorded_height == 0.0:
+        return PREFIX_WRITE
+    scale = math.sqrt(height / recorded_height)
+    return PREFIX_RESUME if 1.0 / PREFIX_MAX_SCALE <= scale <= PREFIX_MAX_SCALE else 0
 
 
 def kernel_arguments(model, height, *, max_steps=MAX_STEPS, flux_override=None,
