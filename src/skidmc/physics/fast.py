@@ -104,6 +104,7 @@ from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION
 __all__ = [
     "CENSOR_ABOVE",
     "CENSOR_BELOW",
+    "CENSOR_NAMES",
     "CENSOR_NONE",
     "C_IGNITION",
     "ERROR_ESTIMATE",
@@ -166,6 +167,8 @@ _GL_W01 = 0.5 * _GL_W
 
 # Censoring codes of the kernels.
 CENSOR_NONE, CENSOR_ABOVE, CENSOR_BELOW = 0, 1, 2
+#: The censoring codes as :class:`skidmc.solver.results.HeightResult` names them.
+CENSOR_NAMES = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
 
 
 # --- melting table ------------------------------------------------------------------------------

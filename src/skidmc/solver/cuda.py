@@ -293,7 +293,7 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     from concurrent.futures import ThreadPoolExecutor
 
     from skidmc._system import available_cpus
-    from skidmc.physics.fast import CENSOR_ABOVE, CENSOR_BELOW, CENSOR_NONE
+    from skidmc.physics.fast import CENSOR_NAMES
     from skidmc.physics.mechanics import EXIT_KINDS
     from skidmc.solver import device
     from skidmc.solver.fast import SCENE_FIELDS, _scene_values
@@ -326,7 +326,6 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
     out = (critical_heights(rows, rtol, h_min, h_max, backend=backend, melting=melting,
                             runaway_fraction=runaway_fraction)[0] if take
            else np.zeros((0, device.OUT_SIZE)))
-    censor_names = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
     results = [None] * len(scenes)
     for i, o in zip(take, out):
         if o[device.OUT_STATUS] != device.STATUS_OK:
@@ -334,7 +333,7 @@ def solve_scenes(scenes, *, backend="cuda", fallback=None, rtol=1e-3, tier="full
         scene = scenes[i]
         model = build_model(scene, meshes=False, melting=melting, rtol=rtol, **extra)
         height = float(o[device.OUT_HEIGHT])
-        censored = censor_names[int(o[device.OUT_CENSOR])]
+        censored = CENSOR_NAMES[int(o[device.OUT_CENSOR])]
         results[i] = HeightResult(
             critical_height=height, censored=censored,
             evaluations=int(o[device.OUT_EVALUATIONS]),

@@ -22,6 +22,7 @@ from skidmc.physics.fast import (
     C_IGNITION,
     CENSOR_ABOVE,
     CENSOR_BELOW,
+    CENSOR_NAMES,
     CENSOR_NONE,
     ERROR_ESTIMATE,
     ERROR_SELF_HEATING,
@@ -76,7 +77,6 @@ _KEY_OF_FIELD = {key.replace(".", "_"): key for key in NUMERIC_KEYS}
 #: bound: ``strict=True`` refuses them (docs/model.md, "Fast tier").
 REFUSED_FLAGS = ("stops_sliding", "self_heating")
 
-_CENSOR_NAMES = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
 _EXIT_NAMES = {EXIT_REBOUND: "rebound", EXIT_STOPS_SLIDING: "stops_sliding"}
 
 
@@ -195,7 +195,7 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
     h, cens, t_exit, ecode, _ = fast_height_kernel(
         *args, float(h_min), float(h_max), float(c_ign), float(melt_factor),
         float(stops_factor), MELT_TABLE, _GL_X01, _GL_W01, N_TIMES)
-    censored = _CENSOR_NAMES[int(cens)]
+    censored = CENSOR_NAMES[int(cens)]
     height = {"above": h_max, "below": h_min}.get(censored, float(h))
     height, censored = _censor_near_bounds(height, censored, error, h_min, h_max)
     return HeightResult(critical_height=height, censored=censored, evaluations=0,

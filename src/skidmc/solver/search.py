@@ -22,6 +22,7 @@ import numbers
 import time
 
 from skidmc.errors import SceneError, SkidmcError
+from skidmc.physics.fast import CENSOR_NAMES
 from skidmc.scene.scenes import Scene
 from skidmc.solver import adaptive
 from skidmc.solver.adaptive import (
@@ -267,7 +268,6 @@ def _fine_search(scene, opts, level, x_tol, coarse, coarse_tol):
 
 _REGIME_CODES = {"steady": REGIME_STEADY, "fading": REGIME_FADING,
                  "stops_sliding": REGIME_STOPS_SLIDING}
-_CENSOR_NAMES = {0: None, 1: "above", 2: "below"}   # skidmc.physics.fast.CENSOR_*
 
 
 def _adaptive_pair(scene, opts, h_guess, start):
@@ -339,7 +339,7 @@ def _adaptive_pair(scene, opts, h_guess, start):
     if "no_friction" not in model.flags:
         flags = flags + model.height_flags(float(res[1, R_HEIGHT]))
     return HeightResult(
-        critical_height=float(height), censored=_CENSOR_NAMES[int(censor)],
+        critical_height=float(height), censored=CENSOR_NAMES[int(censor)],
         evaluations=int(evaluations), flags=flags, error_estimate=float(estimate), rtol=rtol,
         level=float(level), method=opts.method, exit_time=model.exit_time,
         exit_kind=model.exit_kind, terms=model.terms, extrapolated=bool(extrapolated),
