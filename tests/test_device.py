@@ -26,7 +26,7 @@ from skidmc.scene import get_preset, list_presets, make_scene
 from skidmc.solver import critical_height
 from skidmc.solver.cuda import critical_heights, solve_scenes
 from skidmc.solver.device import OUT_STATUS, STATUS_CPU, STATUS_OK
-from skidmc.solver.fast import SCENE_FIELDS
+from skidmc.solver.fast import SCENE_FIELDS, fast_critical_height
 
 MATRIX = ONE_AT_A_TIME + CORNERS
 
@@ -119,6 +119,25 @@ def test_device_search_is_the_cpu_search_on_the_presets(rtol):
         assert dev.evaluations == cpu.evaluations, scene
         assert dev.error_estimate <= rtol * (1.0 + 1e-9)
         assert dev.flags == cpu.flags and dev.exit_kind == cpu.exit_kind
+
+
+@pytest.mark.parametrize("bound", ["h_max", "h_min"])
+def test_device_search_starts_as_the_cpu_search_near_a_bound(bound):
+    # A fast-tier height within its stated error (6 %) of a search bound is no first guess on
+    # either path (skidmc.physics.fast.censor_near_bounds): with the bound 2 % from it, both
+    # searches start elsewhere, alike, and agree to the last bit. (Before the device censored
+    # its guess, all 10 of these solves differed, within tolerance.)
+    for name in ("paper-quartz", "paper-gold"):
+        scene = get_preset(name)
+        fast = fast_critical_height(scene)
+        assert fast.censored is None and fast.error_estimate > 0.02
+        bounds = ({"h_max": 1.02 * fast.critical_height} if bound == "h_max" else
+                  {"h_min": 0.98 * fast.critical_height, "h_max": 1e4})
+        (dev,) = solve_scenes([scene], backend="cpu", rtol=1e-3, **bounds)
+        cpu = critical_height(scene, rtol=1e-3, **bounds)
+        assert dev.method == "device", name
+        assert (dev.critical_height, dev.censored, dev.error_estimate, dev.evaluations) == (
+            cpu.critical_height, cpu.censored, cpu.error_estimate, cpu.evaluations), name
 
 
 def test_device_estimate_bounds_its_error_against_a_tight_solve():

@@ -115,12 +115,14 @@ __all__ = [
     "N_GAUSS",
     "N_TIMES",
     "STOPS_SLIDING_FACTOR",
+    "censor_near_bounds",
     "duhamel_theta",
     "fast_height_core",
     "fast_height_kernel",
     "fast_heights_kernel",
     "melt_depression",
     "melt_table",
+    "stated_error",
 ]
 
 #: Number of uniform times in (0, t_exit] on which Theta and the induction integral are taken.
@@ -169,6 +171,40 @@ _GL_W01 = 0.5 * _GL_W
 CENSOR_NONE, CENSOR_ABOVE, CENSOR_BELOW = 0, 1, 2
 #: The censoring codes as :class:`skidmc.solver.results.HeightResult` names them.
 CENSOR_NAMES = {CENSOR_NONE: None, CENSOR_ABOVE: "above", CENSOR_BELOW: "below"}
+
+
+@njit(cache=True)
+def stated_error(self_heating, exit_code):
+    """Stated relative error of a fast-tier height [1]: :data:`ERROR_SELF_HEATING` where the
+    unheated HE runs away within the hour (``self_heating``, the full tier's validity flag:
+    :func:`skidmc.solver.model.rest_runaway_time`), :data:`ERROR_STOPS_SLIDING` where sliding
+    stops before rebound (``exit_code`` :data:`~skidmc.physics.mechanics.EXIT_STOPS_SLIDING`),
+    else :data:`ERROR_ESTIMATE`. The one rule of :func:`skidmc.solver.fast.fast_error_bound`
+    (by flags), the batch tier and the device search's first guess (by codes).
+    """
+    if self_heating:
+        return ERROR_SELF_HEATING
+    if exit_code == EXIT_STOPS_SLIDING:
+        return ERROR_STOPS_SLIDING
+    return ERROR_ESTIMATE
+
+
+@njit(cache=True)
+def censor_near_bounds(height, censor, error, h_min, h_max):
+    """``(height [m], censor code)``: a height within its stated ``error`` [1] of a bound is
+    censored there.
+
+    The fast tier cannot tell which side of a bound such a height lies on: at phi = 1 deg it
+    found 9,647 m below h_max = 10 km where the full tier finds no event up to h_max. Within
+    ``error`` of h_max (H (1 + error) >= h_max) it reports :data:`CENSOR_ABOVE`, within it of
+    h_min :data:`CENSOR_BELOW`, as the full tier would for a root that close to its bound.
+    Heights already censored are returned as given.
+    """
+    if censor == CENSOR_NONE and height * (1.0 + error) >= h_max:
+        return h_max, CENSOR_ABOVE
+    if censor == CENSOR_NONE and height <= h_min * (1.0 + error):
+        return h_min, CENSOR_BELOW
+    return height, censor
 
 
 # --- melting table ------------------------------------------------------------------------------

@@ -44,10 +44,11 @@ front end (:func:`skidmc.solver.cuda.solve_scenes`) does this; no sample is lost
 stop at the CPU search's cap, the same compiled function (:func:`skidmc.solver.simulate.run_cap`),
 so a run that stalls hands its scene back after a few thousand attempts instead of 200,000.
 
-One difference is left: the fast tier's first guess is not censored near the search bounds
-here (the CPU tier's ``_censor_near_bounds`` needs the scene's validity flags). Within the fast
-tier's error of h_min or h_max the CPU search starts from 1 m instead, and the two results may
-then differ within their tolerance.
+The fast tier's first guess is censored near the search bounds by the CPU tier's own
+compiled rule (:func:`skidmc.physics.fast.censor_near_bounds` with
+:func:`skidmc.physics.fast.stated_error`, the self-heating flag from
+:func:`skidmc.solver.model.rest_runaway_time`), so that a scene whose fast height lies within
+its stated error of h_min or h_max starts where the CPU search starts.
 """
 
 from __future__ import annotations
@@ -64,7 +65,9 @@ from skidmc.physics.fast import (
     MELT_FACTOR,
     N_TIMES,
     STOPS_SLIDING_FACTOR,
+    censor_near_bounds,
     fast_height_core,
+    stated_error,
 )
 from skidmc.physics.mechanics import (
     EXIT_STOPS_SLIDING,
@@ -102,10 +105,12 @@ from skidmc.solver.model import (
     BASE_RESOLUTION,
     DEPTH_DIFFUSION_LENGTHS,
     HORIZON_EXIT_TIMES,
+    SELF_HEATING_TIME,
     flux_extension,
     ignition_temperature,
     level_resolution,
     model_runaway_temperature,
+    rest_runaway_time,
 )
 from skidmc.solver.options import FADING_EXIT_SPEED
 from skidmc.solver.plan import (
@@ -470,14 +475,19 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
         return
 
     # First guess: the fast tier's height (its scratch rows 0-2 are free until `sc` is set),
-    # as the CPU search's _fast_guess takes it (the HE's heat of fusion unless melting is off).
+    # as the CPU search's _fast_guess takes it (the HE's heat of fusion unless melting is off),
+    # none where it is censored, also within its stated error of a bound.
     fusion = row[_HE_L] if melting else 0.0
-    h_fast, censor_fast, _, _, _ = fast_height_core(
+    h_fast, censor_fast, _, exit_fast, _ = fast_height_core(
         mu, row[_SIGMA], row[_MASS], row[_DIAMETER], row[_ANGLE], row[_TILT], row[_T0],
         row[_HE_RHO], row[_HE_C], row[_HE_K], fusion, row[_HE_TM],
         row[_Z], row[_TA], row[_Q], row[_TG_RHO], row[_TG_C], row[_TG_K], row[_TG_P], h_min,
         h_max, C_IGNITION, MELT_FACTOR, STOPS_SLIDING_FACTOR, table,
         gl_x, gl_w, N_TIMES, fast_work[0], fast_work[1], fast_work[2])
+    self_heating = rest_runaway_time(row[_Z], row[_TA], adiabatic_rise,
+                                     row[_T0]) < SELF_HEATING_TIME
+    h_fast, censor_fast = censor_near_bounds(h_fast, censor_fast,
+                                             stated_error(self_heating, exit_fast), h_min, h_max)
     if not (censor_fast == CENSOR_NONE and 0.0 < h_fast < math.inf):
         h_fast = math.nan
 

@@ -14,26 +14,24 @@ import math
 import operator
 
 import numpy as np
+from numba import njit
 
 from skidmc.errors import SceneError
 from skidmc.physics.fast import (
     _GL_W01,
     _GL_X01,
     C_IGNITION,
-    CENSOR_ABOVE,
-    CENSOR_BELOW,
     CENSOR_NAMES,
-    CENSOR_NONE,
     ERROR_ESTIMATE,
-    ERROR_SELF_HEATING,
-    ERROR_STOPS_SLIDING,
     MELT_FACTOR,
     MELT_TABLE,
     N_TIMES,
     STOPS_SLIDING_FACTOR,
+    censor_near_bounds,
     duhamel_theta,
     fast_height_kernel,
     fast_heights_kernel,
+    stated_error,
 )
 from skidmc.physics.mechanics import (
     EXIT_REBOUND,
@@ -50,7 +48,7 @@ from skidmc.scene.keys import (
     bound_reason,
     in_bounds,
 )
-from skidmc.solver.model import SELF_HEATING_TIME, build_model
+from skidmc.solver.model import SELF_HEATING_TIME, build_model, rest_runaway_time
 from skidmc.solver.results import HeightResult
 
 __all__ = [
@@ -118,26 +116,8 @@ def fast_error_bound(flags):
     :data:`~skidmc.physics.fast.ERROR_ESTIMATE` (each measured, with its coverage, by
     ``scripts/fast_tier_error.py``).
     """
-    if "self_heating" in flags:
-        return ERROR_SELF_HEATING
-    if "stops_sliding" in flags:
-        return ERROR_STOPS_SLIDING
-    return ERROR_ESTIMATE
-
-
-def _censor_near_bounds(height, censored, error, h_min, h_max):
-    """A height within its stated ``error`` of a search bound is censored there [m, str].
-
-    The fast tier cannot tell which side of a bound such a height lies on: at phi = 1 deg it
-    found 9,647 m below h_max = 10 km where the full tier finds no event up to h_max. Within
-    ``error`` of h_max (H (1 + error) >= h_max) it reports "above", within it of h_min "below",
-    as the full tier would for a root that close to its bound.
-    """
-    if censored is None and height * (1.0 + error) >= h_max:
-        return h_max, "above"
-    if censored is None and height <= h_min * (1.0 + error):
-        return h_min, "below"
-    return height, censored
+    return stated_error("self_heating" in flags,
+                        EXIT_STOPS_SLIDING if "stops_sliding" in flags else EXIT_REBOUND)
 
 
 def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,
@@ -168,7 +148,7 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
         ``evaluations=0`` (no PDE run), ``method="fast"``, ``error_estimate`` =
         :func:`fast_error_bound` of the scene's flags (measured, see
         results/benchmarks/fast_tier.md). A height within that error of ``h_max`` or ``h_min``
-        is censored there (:func:`_censor_near_bounds`).
+        is censored there (:func:`skidmc.physics.fast.censor_near_bounds`).
     """
     if not (0.0 < h_min < h_max):
         raise SceneError("h_min", h_min, f"need 0 < h_min < h_max (h_max = {h_max!r})")
@@ -195,9 +175,11 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
     h, cens, t_exit, ecode, _ = fast_height_kernel(
         *args, float(h_min), float(h_max), float(c_ign), float(melt_factor),
         float(stops_factor), MELT_TABLE, _GL_X01, _GL_W01, N_TIMES)
+    # Within its stated error of a bound, censored there (the batch tier's and the device
+    # search's rule, one compiled function).
+    height, cens = censor_near_bounds(float(h), int(cens), error, float(h_min), float(h_max))
     censored = CENSOR_NAMES[int(cens)]
-    height = {"above": h_max, "below": h_min}.get(censored, float(h))
-    height, censored = _censor_near_bounds(height, censored, error, h_min, h_max)
+    height = {"above": h_max, "below": h_min}.get(censored, float(height))
     return HeightResult(critical_height=height, censored=censored, evaluations=0,
                         flags=model.flags + model.height_flags(height),
                         error_estimate=error, rtol=error, level=0.0,
@@ -263,32 +245,29 @@ def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITI
                         float(stops_factor), MELT_TABLE, _GL_X01, _GL_W01, N_TIMES, out_h, out_c,
                         out_t, out_e)
     col = dict(zip(SCENE_FIELDS, arrays))
-    error = np.where(_self_heating(col), ERROR_SELF_HEATING,
-                     np.where(out_e == EXIT_STOPS_SLIDING, ERROR_STOPS_SLIDING, ERROR_ESTIMATE))
-    free = out_c == CENSOR_NONE
-    above = free & (out_h * (1.0 + error) >= h_max)
-    below = free & ~above & (out_h <= h_min * (1.0 + error))
-    out_h[above], out_c[above] = h_max, CENSOR_ABOVE
-    out_h[below], out_c[below] = h_min, CENSOR_BELOW
+    error = np.empty(n)
+    _censor_rows(col["kinetics_prefactor"], col["kinetics_activation_temperature"],
+                 col["kinetics_heat_of_reaction"], col["he_heat_capacity"],
+                 col["initial_temperature"], float(h_min), float(h_max), out_h, out_c, out_e,
+                 error)
     return {"critical_height": out_h, "censored": out_c, "exit_time": out_t,
             "exit_code": out_e, "error_estimate": error}
 
 
-def _self_heating(col):
-    """Rows whose unheated HE runs away within :data:`SELF_HEATING_TIME` [bool array].
-
-    The full tier's rule (:func:`skidmc.solver.model.build_model`): min(1/k, tau_ad)(T0) < 1 h,
-    tau_ad = T0^2 / (T_a dT_ad k(T0)), dT_ad = Q / c of the HE.
-    """
-    t0 = col["initial_temperature"]
-    t_a = col["kinetics_activation_temperature"]
-    z = col["kinetics_prefactor"]
-    rise = col["kinetics_heat_of_reaction"] / col["he_heat_capacity"]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ln_k0 = np.log(z) - t_a / t0
-        ln_ratio = np.where(rise > 0.0, np.log(t0**2 / (t_a * rise)), 0.0)
-        ln_rest = -ln_k0 + np.minimum(0.0, ln_ratio)
-    return (z > 0.0) & (ln_rest < np.log(SELF_HEATING_TIME))
+@njit(cache=True)
+def _censor_rows(prefactor, activation_temperature, heat_of_reaction, he_heat_capacity,
+                 initial_temperature, h_min, h_max, height, censor, exit_code, error):
+    """Each row's stated error [1] into ``error``, and its height censored near the bounds in
+    place (``height`` [m], ``censor``): the scalar tier's rule
+    (:func:`skidmc.physics.fast.stated_error`, :func:`skidmc.physics.fast.censor_near_bounds`)
+    row by row, with the full tier's self-heating rule
+    (:func:`skidmc.solver.model.rest_runaway_time`)."""
+    for i in range(height.shape[0]):
+        rest = rest_runaway_time(prefactor[i], activation_temperature[i],
+                                 heat_of_reaction[i] / he_heat_capacity[i],
+                                 initial_temperature[i])
+        error[i] = stated_error(rest < SELF_HEATING_TIME, exit_code[i])
+        height[i], censor[i] = censor_near_bounds(height[i], censor[i], error[i], h_min, h_max)
 
 
 def _check_columns(arrays):

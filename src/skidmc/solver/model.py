@@ -60,6 +60,7 @@ __all__ = [
     "level_resolution",
     "melt_width_floor",
     "resolution_for_level",
+    "rest_runaway_time",
     "target_layers",
     "target_property_change",
     "target_property_table",
@@ -746,17 +747,45 @@ def _ignition_diagnostics(prefactor, activation_temperature, adiabatic_rise,
     """
     if not prefactor > 0.0:
         return math.inf, math.inf
-    ln_k0 = math.log(prefactor) - activation_temperature / initial_temperature
-    ln_rest = -ln_k0 + min(0.0, math.log(initial_temperature**2
-                                         / (activation_temperature * adiabatic_rise))
-                           if adiabatic_rise > 0.0 else 0.0)
-    rest_time = math.exp(min(ln_rest, 700.0))
+    rest_time = float(rest_runaway_time(prefactor, activation_temperature, adiabatic_rise,
+                                        initial_temperature))
     t_ign = float(ignition_temperature(prefactor, activation_temperature, adiabatic_rise, t_exit))
     return t_ign, rest_time
 
 
 # --- the scalar parts of the model as compiled functions: build_model and a GPU thread
 # (skidmc.solver.device) share them.
+
+@njit(cache=True)
+def rest_runaway_time(prefactor, activation_temperature, adiabatic_rise, initial_temperature):
+    """Runaway time of the unheated HE at rest [s]: min(1/k, tau_ad) at T0.
+
+    k = Z exp(-T_a / T0) and tau_ad = T0^2 / (T_a dT_ad k) (Frank-Kamenetskii's adiabatic
+    induction time; for an inert HE, dT_ad = 0, the reaction time 1/k alone), capped at
+    exp(700) s; inf where Z = 0. Below :data:`SELF_HEATING_TIME` the scene has the validity flag
+    "self_heating" (:func:`build_model`), and the fast tier states its larger error
+    (:func:`skidmc.physics.fast.stated_error`): one rule for the flag, the batch fast tier and
+    the device search's first guess.
+
+    Parameters
+    ----------
+    prefactor : float
+        Z [1/s].
+    activation_temperature : float
+        T_a [K].
+    adiabatic_rise : float
+        dT_ad = Q / c1 [K].
+    initial_temperature : float
+        T0 [K].
+    """
+    if not prefactor > 0.0:
+        return math.inf
+    ln_k0 = math.log(prefactor) - activation_temperature / initial_temperature
+    ln_ratio = 0.0
+    if adiabatic_rise > 0.0:
+        ln_ratio = math.log(initial_temperature**2 / (activation_temperature * adiabatic_rise))
+    return math.exp(min(-ln_k0 + min(0.0, ln_ratio), 700.0))
+
 
 @njit(cache=True)
 def flux_extension(omega, t_exit, slide_s, slide_c):
