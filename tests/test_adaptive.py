@@ -180,3 +180,43 @@ def test_the_default_search_models_the_target_as_the_exact_solid():
 def test_target_is_validated(bad):
     with pytest.raises(SceneError, match="target"):
         critical_height(get_preset("paper-quartz"), target=bad)
+
+
+def test_the_fixed_plans_run_on_the_machine_with_the_levels_they_name(monkeypatch):
+    # A forced level, extrapolate=False and a given model are plans of the same machine
+    # (adaptive.PLAN_PAIR, PLAN_SINGLE): the runs it asks for are at the levels the plan names
+    # (the root two levels down first where no guess is given), every run of a given model is
+    # that model's (no coarse start, no fast tier), and the simulations counted are those made.
+    from skidmc.solver import adaptive, search
+    from skidmc.solver.model import build_model
+
+    scene = get_preset("paper-quartz")
+    runs, levels = [], []
+    simulate, asked = search.simulate, adaptive.asked
+
+    def recording_simulate(model, height, **kw):
+        runs.append(model)
+        return simulate(model, height, **kw)
+
+    def recording_asked(ps):
+        out = asked(ps)
+        levels.append(out[0])
+        return out
+
+    monkeypatch.setattr(search, "simulate", recording_simulate)
+    monkeypatch.setattr(adaptive, "asked", recording_asked)
+    cases = [({"level": 1.0}, {1.0}, False), ({"level": 2.0}, {0.0, 2.0}, False),
+             ({"level": 1.5, "extrapolate": True}, {0.5, 1.5}, True),
+             ({"level": 3.0, "extrapolate": True}, {0.0, 2.0, 3.0}, True)]
+    for kwargs, named, extrapolated in cases:
+        runs.clear()
+        levels.clear()
+        res = critical_height(scene, rtol=1e-2, **kwargs)
+        assert set(levels) == named, kwargs
+        assert res.evaluations == len(runs) and res.level == kwargs["level"]
+        assert res.extrapolated is extrapolated and res.melt_bias_estimate == 0.0
+    given = build_model(scene, level=2.0)
+    runs.clear()
+    res = critical_height(scene, rtol=1e-2, model=given)
+    assert runs and all(m is given for m in runs)
+    assert res.evaluations == len(runs) and res.extrapolated is False

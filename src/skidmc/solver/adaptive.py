@@ -1,17 +1,19 @@
-"""The default search, compiled once, as a state machine that its caller drives with simulations.
+"""The search, compiled once, as a state machine that its caller drives with simulations.
 
 The default search of :func:`skidmc.critical_height` is a Richardson pair of levels brought
 within ``rtol`` by rounds. Which searches it runs, in what order, from which guesses, with which
 root finder, when it measures the melting width's bias and what each round does: all of it is
 here, one compiled text, in the form the root finders of :mod:`skidmc.solver.finders` have
-("reverse communication"). The machine never runs a simulation. It asks its caller for one
+("reverse communication"). The fixed plans (a forced level or model, ``extrapolate=False``) run
+here too (:data:`PLAN_PAIR`, :data:`PLAN_SINGLE`): the same searches, without the rounds, with
+the calibrated estimate. The machine never runs a simulation. It asks its caller for one
 (:data:`ASK`: ln H, the level, the melting width, whether the run may stop at the exit, and
 whether it belongs to the current search's linear prefix), the caller runs it however it
 models the scene and hands back the margin ln(t_ev / t_exit) and whether the event came by the
 exit, until the machine is done (:data:`FINISHED`) or, on the device, hands the scene back
 (:data:`HAND_BACK`, the reason in ``reason``).
 
-Two callers drive it: the CPU search (:func:`skidmc.solver.search._adaptive_pair`, with
+Two callers drive it: the CPU search (:func:`skidmc.solver.search._drive`, with
 :func:`skidmc.solver.simulate.simulate` on any model: tabled, layered, meshed targets) and the
 device search (:func:`skidmc.solver.device.critical_height_core`, with the compiled run of a
 constant-property exact target on a CPU or GPU thread's storage). The decisions inside are the
@@ -71,6 +73,7 @@ from skidmc.solver.plan import (
     EXACT_FINE_SHIFT,
     EXACT_FINE_SHIFT_SPREAD,
     EXACT_STEADY_FINE_OVERSHOOT,
+    extrapolated_error,
     modelled_error,
 )
 
@@ -84,6 +87,9 @@ __all__ = [
     "HAND_BACK",
     "MELT_SHIFT_FACTOR",
     "PAIR_STATE",
+    "PLAN_ADAPTIVE",
+    "PLAN_PAIR",
+    "PLAN_SINGLE",
     "POINTS_SHAPE",
     "REGIME_FADING",
     "REGIME_STEADY",
@@ -167,9 +173,14 @@ _SEARCH_DONE, _GAP_DONE = 10, 11
 # max_level. The device search maps these to its HANDBACK_* codes.
 BACK_FAILED, BACK_NARROW, BACK_LEVEL = 1, 2, 3
 
+#: Plans the machine runs (``plan`` of :func:`pair_start`): the default search (a pair and its
+#: rounds, the a posteriori estimate); a fixed pair (``level - 1``, ``level``: one Richardson
+#: value, no round, the calibrated estimate); one search at ``level`` (no extrapolation).
+PLAN_ADAPTIVE, PLAN_PAIR, PLAN_SINGLE = 0, 1, 2
+
 # Stages of the pair.
 (_S_COARSE, _S_FINE, _S_BIAS, _S_TIGHTEN_C, _S_TIGHTEN_F, _S_NARROW_C, _S_NARROW_F,
- _S_NARROW_BIAS, _S_REFINE) = range(9)
+ _S_NARROW_BIAS, _S_REFINE, _S_SINGLE) = range(10)
 # Phases of one level's search: the coarse start two levels down, the search itself; and of one
 # search: its guided finder, then bracketing and Brent's method.
 _PH_GAP, _PH_MAIN = 0, 1
@@ -184,7 +195,7 @@ PAIR_STATE = np.dtype([
     ("melt_spread", np.float64), ("exact", np.int64), ("signs", np.int64),
     ("regime", np.int64), ("melting_term", np.int64), ("measure_bias", np.int64),
     ("allow_narrow", np.int64), ("max_level", np.float64), ("no_friction", np.int64),
-    ("bisection", np.int64),
+    ("bisection", np.int64), ("plan", np.int64), ("own_model", np.int64),
     # the pair
     ("stage", np.int64), ("melt_width", np.float64), ("coarse_level", np.float64),
     ("fine_level", np.float64), ("coarse_tol", np.float64), ("fine_tol", np.float64),
@@ -256,10 +267,10 @@ def _slopes(pts, n, sorted_pts):
 @njit(cache=True)
 def _search_begin(s, res, pts, st, fpts, cur, level, x_tol, guess, overshoot, slope, go_slope,
                   sigma, n_known):
-    """Start a level's search into row ``cur`` (the CPU search's ``_search``), its first
-    ``n_known`` points known: without a guess (NaN), from the root two levels down where
-    ``level`` >= :data:`COARSE_GAP`, else from the fast tier's height. Returns the machine's
-    next (code, x)."""
+    """Start a level's search into row ``cur``, its first ``n_known`` points known: without a
+    guess (NaN), from the root two levels down where ``level`` >= :data:`COARSE_GAP` and the
+    caller models the scene by level (``own_model``), else from the fast tier's height (NaN:
+    none). Returns the machine's next (code, x)."""
     s.cur = cur
     s.level, s.level_tol = level, x_tol
     s.l_guess, s.l_overshoot, s.l_slope, s.l_go_slope, s.l_sigma = (guess, overshoot, slope,
@@ -272,7 +283,7 @@ def _search_begin(s, res, pts, st, fpts, cur, level, x_tol, guess, overshoot, sl
         row[R_X], row[R_CENSOR], row[R_HEIGHT] = s.x_max, CENSOR_ABOVE, s.h_max
         row[R_N], row[R_EVALUATIONS], row[R_OK] = 0.0, 0.0, 1.0
         return _SEARCH_DONE, math.nan
-    if guess != guess and level >= COARSE_GAP and s.bisection == 0:
+    if guess != guess and level >= COARSE_GAP and s.bisection == 0 and s.own_model == 1:
         s.phase = _PH_GAP
         gap = level - COARSE_GAP
         return _one_begin(s, res, pts, st, fpts, gap, max(x_tol, 0.2 * modelled_error(gap)),
@@ -285,8 +296,8 @@ def _search_begin(s, res, pts, st, fpts, cur, level, x_tol, guess, overshoot, sl
 @njit(cache=True)
 def _one_begin(s, res, pts, st, fpts, level, x_tol, guess, overshoot, slope, go_slope, sigma,
                n_known, use_fast):
-    """One search at ``level`` itself: its finder chosen as the CPU search's ``_search``
-    chooses it (the fast tier's height as guess where none is given and ``use_fast``); a new
+    """One search at ``level`` itself, its root finder chosen by the guess and how the margin
+    behaves (the fast tier's height as guess where none is given and ``use_fast``); a new
     search serial (the caller's linear prefix and stall cap start anew)."""
     p = pts[s.cur]
     s.serial += 1
@@ -449,8 +460,9 @@ def _fail(s):
 @njit(cache=True)
 def pair_start(ps, res, pts, st, fpts, rtol, h_min, h_max, level, melt_width, coarse_tol,
                fine_tol, melt_spread, exact, signs, regime, melting_term, measure_bias,
-               allow_narrow, max_level, no_friction, h_fast, h_guess, horizon, bisection):
-    """Start the default search of one scene; returns (code, x) (:func:`pair_step`).
+               allow_narrow, max_level, no_friction, h_fast, h_guess, horizon, bisection,
+               plan=PLAN_ADAPTIVE, own_model=True):
+    """Start the search of one scene; returns (code, x) (:func:`pair_step`).
 
     Parameters
     ----------
@@ -463,7 +475,9 @@ def pair_start(ps, res, pts, st, fpts, rtol, h_min, h_max, level, melt_width, co
     level, melt_width, coarse_tol, fine_tol : float
         The first pair's fine level, its melting width [K] and root tolerances [1]
         (:func:`skidmc.solver.options.resolve_options`,
-        :func:`skidmc.solver.controller.first_root_tolerances`).
+        :func:`skidmc.solver.controller.first_root_tolerances`); for a fixed pair the plan's
+        root tolerance and half of it (:func:`skidmc.solver.plan.root_tolerance`), for one
+        search its level and tolerance in ``level`` and ``fine_tol``.
     melt_spread : float
         Melting spread over each HE cell [1].
     exact, signs : bool
@@ -490,6 +504,13 @@ def pair_start(ps, res, pts, st, fpts, rtol, h_min, h_max, level, melt_width, co
     bisection : bool
         Each search is the report's bisection on go / no-go between the bounds
         (``method="bisection"``) instead of the guided finders and Brent's method.
+    plan : int
+        :data:`PLAN_ADAPTIVE` (the default search), :data:`PLAN_PAIR` or :data:`PLAN_SINGLE`
+        (the fixed plans of a forced level, a given model or ``extrapolate=False``: the
+        calibrated estimate, no round).
+    own_model : bool
+        The caller models the scene level by level (else one model it was given answers every
+        run: no coarse start two levels down; pass ``h_fast`` NaN).
     """
     s = ps[0]
     s.rtol, s.h_min, s.h_max = rtol, h_min, h_max
@@ -500,15 +521,21 @@ def pair_start(ps, res, pts, st, fpts, rtol, h_min, h_max, level, melt_width, co
     s.allow_narrow, s.max_level = 1 if allow_narrow else 0, max_level
     s.no_friction = 1 if no_friction else 0
     s.bisection = 1 if bisection else 0
+    s.plan, s.own_model = plan, 1 if own_model else 0
     s.melt_width, s.coarse_tol, s.fine_tol = melt_width, coarse_tol, fine_tol
     s.coarse_level, s.fine_level = level - 1.0, level
     s.rounds = s.narrowed = s.evaluations = s.serial = 0
     s.reason = 0
     s.melt = math.nan
     s.extrapolated = 0
-    s.stage = _S_COARSE
-    code, value = _search_begin(s, res, pts, st, fpts, 0, level - 1.0, coarse_tol, h_guess,
-                                math.nan, math.nan, math.nan, math.nan, 0)
+    if plan == PLAN_SINGLE:
+        s.stage = _S_SINGLE
+        code, value = _search_begin(s, res, pts, st, fpts, 1, level, fine_tol, h_guess,
+                                    math.nan, math.nan, math.nan, math.nan, 0)
+    else:
+        s.stage = _S_COARSE
+        code, value = _search_begin(s, res, pts, st, fpts, 0, level - 1.0, coarse_tol, h_guess,
+                                    math.nan, math.nan, math.nan, math.nan, 0)
     return _settle(s, res, pts, st, fpts, code, value)
 
 
@@ -539,7 +566,7 @@ def pair_step(ps, res, pts, st, fpts, m, event):
 
 @njit(cache=True)
 def _fine_begin(s, res, pts, st, fpts, x_tol, coarse_tol):
-    """The pair's fine search (the CPU search's ``_fine_search``): from the coarse root, the fine
+    """The pair's fine search: from the coarse root, the fine
     root's measured place above it (with the exact target: EXACT_FINE_SHIFT and its spread
     where the root is located by signs, EXACT_STEADY_FINE_OVERSHOOT on steady rebounds), the
     coarse search's slopes."""
@@ -691,6 +718,11 @@ def _search_done(s, res, pts, st, fpts):
     if stage == _S_COARSE:
         s.stage = _S_FINE
         return _fine_begin(s, res, pts, st, fpts, s.fine_tol, s.coarse_tol)
+    if stage == _S_SINGLE:
+        return _finish(s, res)
+    if stage == _S_FINE and s.plan == PLAN_PAIR:
+        _value(s, res)   # its Richardson value; _finish states the calibrated estimate
+        return _finish(s, res)
     if stage == _S_FINE or stage == _S_NARROW_F:
         return _bias_begin(s, res, pts, st, fpts)
     if stage == _S_TIGHTEN_C:
@@ -711,20 +743,28 @@ def _round_end(s, res, pts, st, fpts):
 
 @njit(cache=True)
 def _finish(s, res):
-    """The outcome: the pair's Richardson value, or the fine search's own result (its bound
-    when censored) with the calibrated estimate of its level; an extrapolation beyond a bound
-    is censored there (the CPU search's ``_censor_beyond_bounds``)."""
+    """The outcome: the pair's Richardson value (its a posteriori estimate; a fixed pair's
+    calibrated one, :func:`skidmc.solver.plan.extrapolated_error` plus the coarse root's
+    tolerance and the width's bias), or the fine search's own result (its bound when censored)
+    with the calibrated estimate of its level; a pair's extrapolation beyond a bound is
+    censored there, its estimate kept."""
     fine = res[1]
     s.out_level = s.fine_level
+    # The melting width's bias bound, 0 at the level's floor width, where the level's modelled
+    # error holds it (skidmc.solver.plan.melt_bias).
+    width_bias = 0.0
+    if s.melting_term == 1 and s.melt_width > melt_width_floor(s.fine_level) * (1.0 + 1e-9):
+        width_bias = MELT_WIDTH_BIAS_PER_K * s.melt_width
     if s.extrapolated == 1:
         s.out_height, s.out_censor, s.out_error = s.height, CENSOR_NONE, s.estimate
+        if s.plan == PLAN_PAIR:
+            s.out_error = extrapolated_error(s.fine_level) + s.coarse_tol + width_bias
     else:
-        width_bias = 0.0
-        if s.melting_term == 1 and s.melt_width > melt_width_floor(s.fine_level) * (1.0 + 1e-9):
-            width_bias = MELT_WIDTH_BIAS_PER_K * s.melt_width
         s.out_height, s.out_censor = fine[R_HEIGHT], int(fine[R_CENSOR])
         s.out_error = modelled_error(s.fine_level) + s.fine_tol + width_bias
     s.out_extrapolated = s.extrapolated
+    if s.plan == PLAN_SINGLE:
+        return FINISHED, math.nan
     if s.out_censor == CENSOR_NONE and not (s.h_min < s.out_height < s.h_max):
         above = s.out_height >= s.h_max
         s.out_censor = CENSOR_ABOVE if above else CENSOR_BELOW
@@ -749,4 +789,5 @@ def outcome(ps):
     s = ps[0]
     pair = s.extrapolated == 1
     return (s.out_height, s.out_censor, s.out_error, s.out_level, s.out_extrapolated == 1,
-            s.relative if pair else 0.0, s.melt_bias if pair else 0.0, s.evaluations)
+            s.relative if pair else 0.0,
+            s.melt_bias if pair and s.plan == PLAN_ADAPTIVE else 0.0, s.evaluations)

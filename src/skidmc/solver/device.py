@@ -90,6 +90,7 @@ from skidmc.solver.adaptive import (
     BACK_NARROW,
     HAND_BACK,
     PAIR_STATE,
+    PLAN_ADAPTIVE,
     POINTS_SHAPE,
     REGIME_FADING,
     REGIME_STEADY,
@@ -501,7 +502,7 @@ def critical_height_core(row, rtol, h_min, h_max, melt_spread, melting, runaway_
     code, value = pair_start(ps, res, pts, st, fpts, rtol, h_min, h_max, level, melt_width,
                              coarse_tol, fine_tol, melt_spread, True, signs, regime,
                              melting_term, False, False, DEVICE_MAX_LEVEL, False, h_fast,
-                             math.nan, horizon, False)
+                             math.nan, horizon, False, PLAN_ADAPTIVE, True)
     built, serial = -1.0, -1
     n_cells, tol_temperature = 0, 0.0
     while code == ASK_RUN:

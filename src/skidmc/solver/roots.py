@@ -1,4 +1,8 @@
-"""Root finders of the CPU search, each a function of a margin m(x), x = ln H.
+"""Root finders as Python functions of a margin m(x), x = ln H.
+
+The searches of :func:`skidmc.critical_height` (every plan) and of the device drive the
+compiled finders through the machine of :mod:`skidmc.solver.adaptive`; these drivers serve a
+caller with a margin function of its own (``scripts/go_side_bend.py``, the tests).
 
 ``margin(x)`` runs (or recalls) one simulation and returns ln(t_ev / t_exit): go <=> m <= 0.
 The finders differ in what they know beforehand: a guess and a slope (:func:`go_side_root`,

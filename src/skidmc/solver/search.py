@@ -16,7 +16,6 @@ acted yet. The report's own method, geometric bisection on go/no-go, is kept as
 """
 
 
-import dataclasses
 import math
 import numbers
 import time
@@ -42,7 +41,7 @@ from skidmc.solver.adaptive import (
     REGIME_STEADY,
     REGIME_STOPS_SLIDING,
 )
-from skidmc.solver.controller import MAX_ADAPTIVE_ROUNDS, first_root_tolerances, richardson_value
+from skidmc.solver.controller import MAX_ADAPTIVE_ROUNDS, first_root_tolerances
 from skidmc.solver.model import (
     build_model,
     constant_property_scene,
@@ -58,26 +57,8 @@ from skidmc.solver.options import (
     exit_regime,
     resolve_options,
 )
-from skidmc.solver.plan import (
-    EXACT_FINE_SHIFT,
-    EXACT_FINE_SHIFT_SPREAD,
-    EXACT_STEADY_FINE_OVERSHOOT,
-    extrapolated_error,
-    melt_bias,
-    modelled_error,
-    root_tolerance,
-)
+from skidmc.solver.plan import root_tolerance
 from skidmc.solver.results import HeightResult, flag_unmet_rtol
-from skidmc.solver.roots import (
-    FAST_GUESS_ERROR,
-    JUMP_SLOPE,
-    bisection_root,
-    brent_root,
-    go_side_root,
-    go_side_slope,
-    margin_slope,
-    prior_bisection_root,
-)
 from skidmc.solver.simulate import LinearPrefix, SolverError, simulate
 
 __all__ = ["COARSE_GAP", "DEFAULT_H_MAX", "DEFAULT_H_MIN", "FADING_EXIT_SPEED",
@@ -217,19 +198,13 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
         return _adaptive_pair(scene, opts, h_guess, start)
     x_tol = root_tolerance(rtol, opts.level, opts.extrapolate, opts.melt_width)
     if not opts.extrapolate:
-        res = _search(scene, opts, opts.level, x_tol, model=model, h_guess=h_guess)
-        res.wall_time = time.perf_counter() - start
-        return res
-
+        return _search(scene, opts, opts.level, x_tol, model=model, h_guess=h_guess,
+                       start=start)
     # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
     # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
     # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
-    coarse = _search(scene, opts, opts.level - 1.0, x_tol, h_guess=h_guess)
-    fine = _fine_search(scene, opts, opts.level, 0.5 * x_tol, coarse, x_tol)
-    res = _censor_beyond_bounds(_richardson(coarse, fine, opts, x_tol), h_min, h_max)
-    res.evaluations = coarse.evaluations + fine.evaluations
-    res.wall_time = time.perf_counter() - start
-    return res
+    return _drive(scene, opts, adaptive.PLAN_PAIR, opts.level, x_tol, 0.5 * x_tol, h_guess,
+                  start)
 
 
 critical_height.__doc__ = _critical_height.__doc__.replace(
@@ -241,29 +216,6 @@ critical_height.__doc__ = _critical_height.__doc__.replace(
     "    ``error_estimate`` is the one reached.\n\n"
     "    Returns\n", 1)
 critical_height.__wrapped__ = _critical_height  # inspect.signature: the full signature
-
-
-def _fine_search(scene, opts, level, x_tol, coarse, coarse_tol):
-    """The fine search of a Richardson pair, started from its coarse search's root and slopes.
-
-    The fine root lies above the coarse one by about 3/4 of the coarse level's error (the
-    errors are negative and shrink 4x per level; the fine level keeps 1/4 of it): the go-side
-    search starts that far up, which lands on the go side within the error model. Where the
-    margin jumps (sliding stops), the coarse root's own tolerance ``coarse_tol`` [1] widens
-    the prior of the fine root (:func:`skidmc.solver.roots.prior_bisection_root`). With the
-    exact target on a scene located by ``opts.signs``, the prior is the one measured for it
-    (:data:`skidmc.solver.plan.EXACT_FINE_SHIFT`, ``EXACT_FINE_SHIFT_SPREAD``).
-    """
-    coarse_error = modelled_error(level - 1.0)
-    overshoot, spread = 0.75, FINE_SHIFT_SPREAD
-    if opts.exact:
-        overshoot = 2.0 * EXACT_FINE_SHIFT if opts.signs else EXACT_STEADY_FINE_OVERSHOOT
-        spread = EXACT_FINE_SHIFT_SPREAD
-    return _search(scene, opts, level, x_tol,
-                   h_guess=coarse.critical_height if coarse.censored is None else None,
-                   overshoot=overshoot * coarse_error,
-                   guess_sigma=spread * coarse_error + 0.5 * coarse_tol,
-                   slope=margin_slope(coarse.history), go_slope=go_side_slope(coarse.history))
 
 
 _REGIME_CODES = {"steady": REGIME_STEADY, "fading": REGIME_FADING,
@@ -280,57 +232,100 @@ def _adaptive_pair(scene, opts, h_guess, start):
     tolerances allow), then the rounds of :func:`skidmc.solver.controller.next_round` (tighten
     the roots from their own simulations, search the pair again with a narrower melting width,
     or move the pair up a level) until the estimate meets rtol or nothing left can help: then
-    the estimate stays above rtol and says so. This function only answers the machine's
-    questions: each run it asks for is :func:`skidmc.solver.simulate.simulate` on the model of
-    its level and melting width, the runs of one search sharing a :class:`LinearPrefix`.
+    the estimate stays above rtol and says so.
+    """
+    coarse_tol, fine_tol = first_root_tolerances(opts.rtol, opts.level, opts.melt_width,
+                                                 opts.melt_spread, opts.exact, opts.signs)
+    return _drive(scene, opts, adaptive.PLAN_ADAPTIVE, opts.level, coarse_tol, fine_tol,
+                  h_guess, start)
+
+
+def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, start=None):
+    """One critical-height search at one resolution level, the root to ``x_tol`` [1, in ln H]
+    (the fixed plan of a forced level or model without extrapolation; see
+    :func:`critical_height`), with the calibrated estimate of its level.
+
+    With no guess, the search starts from the root found at ``level - COARSE_GAP`` (levels >=
+    COARSE_GAP) or from the fast tier's height; with a given ``model`` from neither. The
+    machine of :mod:`skidmc.solver.adaptive` chooses the root finder, as in every search.
+    """
+    return _drive(scene, opts, adaptive.PLAN_SINGLE, level, math.nan, x_tol, h_guess,
+                  time.perf_counter() if start is None else start, model=model)
+
+
+def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model=None):
+    """Run the machine of :mod:`skidmc.solver.adaptive` on one scene with ``plan``
+    (``PLAN_*``), answering each run it asks for [HeightResult].
+
+    Each run is :func:`skidmc.solver.simulate.simulate` on the model of its level and melting
+    width (or on ``model`` where one was given), the runs of one search sharing a
+    :class:`LinearPrefix`. ``level`` is the (first) pair's fine level or the single search's;
+    ``coarse_tol``, ``fine_tol`` [1] the root tolerances of the pair's searches (the single
+    search's in ``fine_tol``).
     """
     rtol = opts.rtol
-    coarse_tol, fine_tol = first_root_tolerances(rtol, opts.level, opts.melt_width,
-                                                 opts.melt_spread, opts.exact, opts.signs)
     kwargs = dict(melting=opts.melting, melt_spread=opts.melt_spread, target=opts.target,
                   rtol=rtol, **opts.model_kwargs())
-    probe = build_model(scene, level=opts.level - 1.0, meshes=False, **kwargs)
-    melting_term = "melting" in probe.terms
-    # The melting width's bias is measured where the calibrated bound does not apply: scenes
-    # that ignite below the melting point (the bound was measured on scenes igniting above it:
-    # the presets, ~47 K above; a level-0 shift overstates the bias there, 3.5x on
-    # paper-quartz; below it the runaway starts where the smoothed step releases its latent
-    # heat, and the bias is the scene's own, 15x the bound at E/R = 15,000 K with a fast
-    # prefactor).
-    measure_bias = melting_term and build_model(
-        scene, level=opts.level - 1.0, melting=opts.melting,
-        meshes=False).ignition_temperature < scene.he_melting_point
-    fast = None if h_guess is not None else _fast_guess(scene, opts.h_min, opts.h_max,
-                                                        opts.melting)
-    ps, res, pts, st, fpts = adaptive.new_storage()
-    code, x = adaptive.pair_start(
-        ps, res, pts, st, fpts, rtol, opts.h_min, opts.h_max, opts.level, opts.melt_width,
-        coarse_tol, fine_tol, opts.melt_spread, opts.exact, opts.signs,
-        _REGIME_CODES[exit_regime(scene)], melting_term, measure_bias, True, math.inf,
-        "no_friction" in probe.flags, math.nan if fast is None else fast,
-        math.nan if h_guess is None else float(h_guess),
-        math.log(probe.end_time / probe.exit_time), opts.method == "bisection")
-    models, prefix, serial = {}, None, -1
+    own_model = model is None
+    models = {}
 
     def model_of(level, width):
+        if not own_model:
+            return model
         key = (level, width)
         if key not in models:
             models[key] = build_model(scene, level=level, melt_width=width, **kwargs)
         return models[key]
 
+    measure_bias = False
+    if plan == adaptive.PLAN_ADAPTIVE:
+        probe = build_model(scene, level=level - 1.0, meshes=False, **kwargs)
+    else:
+        # A fixed plan states the terms and flags of the level it returns.
+        probe = model_of(level, opts.melt_width)
+    melting_term = "melting" in probe.terms
+    if plan == adaptive.PLAN_ADAPTIVE:
+        # The melting width's bias is measured where the calibrated bound does not apply:
+        # scenes that ignite below the melting point (the bound was measured on scenes igniting
+        # above it: the presets, ~47 K above; a level-0 shift overstates the bias there, 3.5x
+        # on paper-quartz; below it the runaway starts where the smoothed step releases its
+        # latent heat, and the bias is the scene's own, 15x the bound at E/R = 15,000 K with a
+        # fast prefactor).
+        measure_bias = melting_term and build_model(
+            scene, level=level - 1.0, melting=opts.melting,
+            meshes=False).ignition_temperature < scene.he_melting_point
+    if own_model:
+        regime = _REGIME_CODES[exit_regime(scene)]
+        fast = None if h_guess is not None else _fast_guess(scene, opts.h_min, opts.h_max,
+                                                            opts.melting)
+    else:
+        # One model answers every run: how its heating ends, no coarse start, no fast tier.
+        regime = (REGIME_STOPS_SLIDING if model.exit_kind == "stops_sliding" else
+                  REGIME_STEADY)
+        fast = None
+    ps, res, pts, st, fpts = adaptive.new_storage()
+    code, x = adaptive.pair_start(
+        ps, res, pts, st, fpts, rtol, opts.h_min, opts.h_max, level,
+        opts.melt_width if own_model else model.resolution.melt_width, coarse_tol, fine_tol,
+        opts.melt_spread, opts.exact, opts.signs, regime, melting_term, measure_bias, True,
+        math.inf, "no_friction" in probe.flags, math.nan if fast is None else fast,
+        math.nan if h_guess is None else float(h_guess),
+        math.log(probe.end_time / probe.exit_time), opts.method == "bisection", plan,
+        own_model)
+    prefix, serial = None, -1
     while code == ASK_RUN:
-        level, width, until_exit, alone, ask_serial = adaptive.asked(ps)
-        model = model_of(level, width)
+        ask_level, width, until_exit, alone, ask_serial = adaptive.asked(ps)
+        run_model = model_of(ask_level, width)
         if not alone and ask_serial != serial:
-            prefix, serial = LinearPrefix(model), ask_serial   # a new search
-        sim = simulate(model, math.exp(x), until_exit=until_exit,
+            prefix, serial = LinearPrefix(run_model), ask_serial   # a new search
+        sim = simulate(run_model, math.exp(x), until_exit=until_exit,
                        prefix=None if alone else prefix)
         code, x = adaptive.pair_step(ps, res, pts, st, fpts, sim.margin, sim.event)
     if code != FINISHED:   # pragma: no cover - a CPU run raises instead of failing quietly
         raise SolverError(f"the search ended without a root (reason {int(ps[0]['reason'])})")
     (height, censor, estimate, level, extrapolated, correction, melt_bias,
      evaluations) = adaptive.outcome(ps)
-    # The fine search's history, flags and model (its own height's flags, as _search gives).
+    # The fine search's history, flags and model (its own height's flags).
     model = model_of(level, float(ps[0]["melt_width"]))
     n = int(res[1, R_N])
     history = sorted((math.exp(float(x)), float(m))
@@ -345,163 +340,6 @@ def _adaptive_pair(scene, opts, h_guess, start):
         exit_kind=model.exit_kind, terms=model.terms, extrapolated=bool(extrapolated),
         richardson_correction=float(correction), melt_bias_estimate=float(melt_bias),
         history=history, wall_time=time.perf_counter() - start)
-
-
-def _censor_beyond_bounds(res, h_min, h_max):
-    """``res`` censored at the search bound its extrapolated height crossed [a new result].
-
-    Both roots of a Richardson pair lie inside [h_min, h_max], but their extrapolation may not:
-    a fine root just below h_max with a coarse one below it extrapolates above (the extremes
-    matrix's box: 1002 m with h_max = 1000 m). The converged model then has no event at the
-    bound, which is what "above" says (and "below" for h_min); the error estimate is kept.
-    """
-    if res.censored is not None or h_min < res.critical_height < h_max:
-        return res
-    censored = "above" if res.critical_height >= h_max else "below"
-    return dataclasses.replace(res, censored=censored, extrapolated=False,
-                               critical_height=h_max if censored == "above" else h_min)
-
-
-def _pair_value(coarse, fine):
-    """The Richardson value of a pair of searches (a new result; ``fine`` if either is
-    censored) and whether it was extrapolated."""
-    res = dataclasses.replace(fine, history=list(fine.history))
-    if fine.censored is not None or coarse.censored is not None:
-        return res, False
-    res.critical_height, res.richardson_correction = richardson_value(coarse.critical_height,
-                                                                      fine.critical_height)
-    res.extrapolated = True
-    return res, True
-
-
-def _richardson(coarse, fine, opts, x_tol):
-    """The Richardson value of a pair of a fixed plan, with the calibrated model's estimate
-    (``x_tol``: the plan's root tolerance [1])."""
-    res, extrapolated = _pair_value(coarse, fine)
-    if extrapolated:
-        res.error_estimate = (extrapolated_error(fine.level) + x_tol
-                              + melt_bias(fine.terms, opts.melt_width, fine.level))
-    return res
-
-
-def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, overshoot=None, slope=None,
-            go_slope=None, guess_sigma=None):
-    """One critical-height search at one resolution level (see :func:`critical_height`).
-
-    ``x_tol`` [1] is the root finder's tolerance on ln H. With no guess, the search starts
-    from the root found at ``level - COARSE_GAP`` (levels >= COARSE_GAP) or from the fast
-    tier's height. From a guess, a rebound exit's root is extrapolated along the go side
-    (:func:`~skidmc.solver.roots.go_side_root`, 1-3 simulations); where sliding stops, the
-    root's prior is bisected (:func:`~skidmc.solver.roots.prior_bisection_root`; its spread is
-    ``guess_sigma`` [1, in ln H] when given). Otherwise bracketing and Brent's method take
-    over, reusing every simulation done. The default search does not come here: its searches
-    are the compiled machine's (:func:`_adaptive_pair`); this is the search of the fixed plans
-    (a forced level or model, no extrapolation, the report's bisection).
-    """
-    rtol, method, h_min, h_max = opts.rtol, opts.method, opts.h_min, opts.h_max
-    own_model = model is None
-    if own_model:
-        model = build_model(scene, level=level, melting=opts.melting,
-                            melt_width=opts.melt_width, melt_spread=opts.melt_spread,
-                            target=opts.target, rtol=rtol, **opts.model_kwargs())
-    base = dict(rtol=rtol, level=level, method=method, exit_time=model.exit_time,
-                exit_kind=model.exit_kind, terms=model.terms, flags=model.flags,
-                error_estimate=(modelled_error(level) + x_tol
-                                + melt_bias(model.terms, model.resolution.melt_width,
-                                             level)))
-
-    if "no_friction" in model.flags:
-        return HeightResult(critical_height=h_max, censored="above", evaluations=0, **base)
-
-    coarse_evaluations = 0
-    from_fast_tier = False
-    if method == "brent" and h_guess is None and own_model and level >= COARSE_GAP:
-        coarse = _search(scene, opts, level - COARSE_GAP,
-                         max(x_tol, 0.2 * modelled_error(level - COARSE_GAP)))
-        coarse_evaluations = coarse.evaluations
-        if coarse.censored is None:
-            h_guess = coarse.critical_height
-            slope = margin_slope(coarse.history)
-            go_slope = go_side_slope(coarse.history)
-            # The fine root lies within the coarse level's error of the coarse root.
-            overshoot = 2.0 * modelled_error(level - COARSE_GAP)
-    elif method == "brent" and h_guess is None and own_model:
-        fast = _fast_guess(scene, h_min, h_max, opts.melting)
-        if fast is not None:
-            h_guess, overshoot, from_fast_tier = fast, FAST_GUESS_ERROR, True
-
-    cache = {}
-    # A margin that jumped at the root of the search the guess came from (a coarser level, or
-    # this one at a looser tolerance) is searched by its signs (prior_bisection_root): its
-    # go side says nothing about where the jump lies.
-    jumped = slope is not None and slope < -JUMP_SLOPE
-    # From the fast tier's height, a rebound whose heating fades before the exit is searched
-    # from the prior of its root (FADING_FAST_SHIFT above that height): the go-side search
-    # would start below the root there, and its first step up overshoots by the margin's jump.
-    fading = from_fast_tier and exit_regime(scene) == "fading"
-    # Where the root is located by the margin's signs alone (prior_bisection_root below: sliding
-    # stops before rebound, or a rebound's margin jumped or its heating fades), a simulation
-    # without an event by the exit stops there (until_exit; margin inf) instead of going on
-    # under the extension flux to ~1.1 t_exit, which took 35-40 % of a no-go run's steps and
-    # half its time. The verdict is the same: only events before the exit count.
-    signs_only = method == "brent" and h_guess is not None and (
-        model.exit_kind != "rebound" or jumped or fading)
-    sign_only_points = set()
-    # The search's runs share their linear start (the first run records it).
-    prefix = LinearPrefix(model)
-
-    def margin(x):
-        if x not in cache:
-            sim = simulate(model, math.exp(x), until_exit=signs_only, prefix=prefix)
-            cache[x] = sim.margin
-            if signs_only and not sim.event:
-                sign_only_points.add(x)
-        return cache[x]
-
-    x_min, x_max = math.log(h_min), math.log(h_max)
-    x_root = None
-    if method == "bisection":
-        x_root, censored = bisection_root(margin, x_min, x_max, x_tol)
-    elif h_guess is not None and model.exit_kind == "rebound" and not (jumped or fading):
-        x_root = go_side_root(margin, math.log(h_guess), go_slope, x_tol, x_min, x_max,
-                               guess_error=overshoot or FAST_GUESS_ERROR)
-        censored = None
-    elif h_guess is not None:
-        # Sliding stops before rebound, or the guess's search saw the margin jump at its root
-        # (``slope`` steeper than JUMP_SLOPE: some rebound scenes, whose event either comes
-        # before the exit or not at all): the margin jumps at the root, so only the signs of its
-        # values locate it. The prior of the root: the fast tier's height and its measured
-        # scatter there (FADING_FAST_SHIFT above it where the heating fades), or (a coarser
-        # level's root, a re-search) half the guess's uncertainty up, with guess_sigma or a
-        # third of that as its spread (a Richardson pair's fine search: 0.375 of the coarse
-        # level's modelled error up, FINE_SHIFT_SPREAD of it wide).
-        if fading:
-            center, sigma = math.log(h_guess) + FADING_FAST_SHIFT, FADING_FAST_SPREAD
-        elif from_fast_tier:
-            center, sigma = math.log(h_guess), FAST_STOPS_SLIDING_SPREAD
-        else:
-            spread = 0.5 * (overshoot or FAST_GUESS_ERROR)
-            center, sigma = math.log(h_guess) + spread, guess_sigma or spread / 3.0
-        x_root, censored = prior_bisection_root(margin, center, sigma, x_tol, x_min, x_max,
-                                                slope=slope,
-                                                signs_only=signs_only), None
-    if x_root is None:
-        # Brent's bracketing steps by the margin's value: the sign-only runs are done again in
-        # full when it needs them.
-        signs_only = False
-        for x in sign_only_points:
-            del cache[x]
-        x_root, censored = brent_root(margin, x_min, x_max, x_tol,
-                                       math.log(model.end_time / model.exit_time), h_guess,
-                                  overshoot=overshoot or 0.05)
-    history = sorted((math.exp(x), m) for x, m in cache.items())
-    # Censored results report the bound itself, exactly as given.
-    height = {"above": h_max, "below": h_min}.get(censored, math.exp(x_root))
-    # Validity at the height found (indentation depth, sliding distance): skidmc.solver.model.
-    base["flags"] = model.flags + model.height_flags(height)
-    return HeightResult(critical_height=height, censored=censored,
-                        evaluations=len(cache) + coarse_evaluations, history=history,
-                        **base)
 
 
 def _fast_guess(scene, h_min, h_max, melting):
