@@ -8,7 +8,9 @@ middle of the rise), with no measurement behind it; a guess far off costs the se
 steps (never a wrong root). This script measures ln(H_fast(f) / H) against the default search's
 height H at rtol 1e-2 over a grid of f, on the temperature-dependent-target scenes of one draw
 of the shipped studies' ensembles (``benchmarks/study_scenes.py``, the training set: seed 45) and
-checks the fitted f on another draw (the test set: seed 46), reporting both.
+checks the fitted f on another draw (the test set: seed 46), reporting both. It also measures
+rules without a fitted constant: means of k and c over the rise (:data:`MEANS`) and over the
+fast tier's own interface rise, found again with them (:data:`OWN_RISE`).
 
 Usage::
 
@@ -39,6 +41,10 @@ FRACTIONS = np.round(np.arange(0.0, 1.0001, 0.05), 2)
 #: sqrt(k c) with c's arithmetic mean.
 MEANS = ("arithmetic k and c", "harmonic k, arithmetic c", "geometric k and c",
          "harmonic effusivity")
+#: The same means over the fast tier's own interface rise, T0..T0 + sqrt(H_fast) max Theta
+#: (:func:`skidmc.solver.fast.theta_history`), H_fast found again with them, 3 times from the
+#: middle of the rise (the interface peaks at ~0.78 of the runaway temperature's rise).
+OWN_RISE = ("own rise: middle", "own rise: harmonic k, arithmetic c")
 
 
 def _mean_properties(kind, k, c):
@@ -57,19 +63,54 @@ def tabled_scenes(seed, n):
             if ":" in group]
 
 
-def offsets(scenes):
-    """{f or mean: [ln(H_fast / H)]} and the labels used (scenes the fast tier or search censor
-    are left out)."""
-    from skidmc.solver import critical_height
-    from skidmc.solver.fast import fast_critical_height
-    from skidmc.solver.model import (
-        build_model,
-        constant_property_scene,
-        target_property_table,
-        target_temperature_range,
-    )
+def _held(scene, k, c):
+    """The scene with constant target properties k [W/(m K)] and c [J/(kg K)], no table."""
+    return scene.replace({"target.conductivity": float(k), "target.heat_capacity": float(c),
+                          "target.table": ""}, check_plausible=False)
 
-    out = {**{float(f): [] for f in FRACTIONS}, **{kind: [] for kind in MEANS}}
+
+def _guesses(scene, low, high):
+    """{f or rule: the fast tier's height [m] (None where censored)} for one tabled scene."""
+    from skidmc.solver.fast import fast_critical_height, theta_history
+    from skidmc.solver.model import constant_property_scene, target_property_table
+
+    def height(held):
+        fast = fast_critical_height(held, h_min=1e-3, h_max=1e4)
+        return fast.critical_height if fast.censored is None else None
+
+    t, k, c = target_property_table(scene)
+    out = {float(f): height(constant_property_scene(scene, low + f * (high - low)))
+           for f in FRACTIONS}
+    temps = np.linspace(low, high, 401)
+    for kind in MEANS:
+        out[kind] = height(_held(scene, *_mean_properties(kind, np.interp(temps, t, k),
+                                                          np.interp(temps, t, c))))
+    for kind in OWN_RISE:
+        held = constant_property_scene(scene, 0.5 * (low + high))
+        h = height(held)
+        for _ in range(3):
+            if h is None:
+                break
+            peak = max(low, scene.initial_temperature
+                       + math.sqrt(h) * float(theta_history(held)[1].max()))
+            if kind == OWN_RISE[0]:
+                held = constant_property_scene(scene, 0.5 * (low + peak))
+            else:
+                temps = np.linspace(low, peak, 401)
+                held = _held(scene, *_mean_properties(MEANS[1], np.interp(temps, t, k),
+                                                      np.interp(temps, t, c)))
+            h = height(held)
+        out[kind] = h
+    return out
+
+
+def offsets(scenes):
+    """{f or rule: [ln(H_fast / H)]} and the labels used (scenes the search or any guess
+    censors are left out)."""
+    from skidmc.solver import critical_height
+    from skidmc.solver.model import build_model, target_temperature_range
+
+    out = {**{float(f): [] for f in FRACTIONS}, **{kind: [] for kind in MEANS + OWN_RISE}}
     used = []
     for label, scene in scenes:
         ref = critical_height(scene, rtol=1e-2)
@@ -78,28 +119,12 @@ def offsets(scenes):
         model = build_model(scene, meshes=False)
         low, high = target_temperature_range(scene.initial_temperature,
                                              model.runaway_temperature)
-        row = {}
-        for f in FRACTIONS:
-            fast = fast_critical_height(constant_property_scene(scene, low + f * (high - low)),
-                                        h_min=1e-3, h_max=1e4)
-            if fast.censored is not None:
-                break
-            row[float(f)] = math.log(fast.critical_height / ref.critical_height)
-        t, k, c = target_property_table(scene)
-        temps = np.linspace(low, high, 401)
-        for kind in MEANS:
-            k_mean, c_mean = _mean_properties(kind, np.interp(temps, t, k),
-                                              np.interp(temps, t, c))
-            fast = fast_critical_height(scene.replace(
-                {"target.conductivity": float(k_mean), "target.heat_capacity": float(c_mean),
-                 "target.table": ""}, check_plausible=False), h_min=1e-3, h_max=1e4)
-            if fast.censored is not None:
-                break
-            row[kind] = math.log(fast.critical_height / ref.critical_height)
-        else:
-            used.append(label)
-            for f, v in row.items():
-                out[f].append(v)
+        guesses = _guesses(scene, low, high)
+        if any(h is None for h in guesses.values()):
+            continue
+        used.append(label)
+        for key, h in guesses.items():
+            out[key].append(math.log(h / ref.critical_height))
     return out, used
 
 
@@ -153,14 +178,15 @@ def main(argv=None):
         lines.append(f"| {material} | {len(rows[best])} | {own:.2f} | "
                      f"{float(np.median(np.abs(rows[own]))):.3f} | {a[0]:+.3f} | {a[1]:.3f} | "
                      f"{a[2]:.3f} | {a[3]:.3f} |")
-    lines += ["", "Means of the table over the rise instead of one temperature (no constant "
+    lines += ["", "Means of the table over the rise, or over the fast tier's own interface "
+              "rise (found again 3 times), instead of one temperature (no constant "
               "fitted; training and test sets together), against the median 0.013 of "
               "constant targets (`skidmc.solver.finders.FAST_GUESS_ERROR` rounds it up to "
               "0.02):", "",
               "| properties | material | median ln ratio | median abs | p90 abs | max abs |",
               "|---|---|---|---|---|---|"]
     labels = used_train + used_test
-    for kind in (0.5, *MEANS):
+    for kind in (0.5, *MEANS, *OWN_RISE):
         values = train[kind] + test[kind]
         name = "middle of the rise (f = 0.50)" if kind == 0.5 else kind
         for material in ("all", *sorted({label.rsplit(":", 1)[1] for label in labels})):
