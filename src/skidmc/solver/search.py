@@ -290,10 +290,9 @@ def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model
         # above it: the presets, ~47 K above; a level-0 shift overstates the bias there, 3.5x
         # on paper-quartz; below it the runaway starts where the smoothed step releases its
         # latent heat, and the bias is the scene's own, 15x the bound at E/R = 15,000 K with a
-        # fast prefactor).
-        measure_bias = melting_term and build_model(
-            scene, level=level - 1.0, melting=opts.melting,
-            meshes=False).ignition_temperature < scene.he_melting_point
+        # fast prefactor). The ignition temperature depends on the kinetics and the exit time
+        # only: the probe's.
+        measure_bias = melting_term and probe.ignition_temperature < scene.he_melting_point
     if own_model:
         regime = _REGIME_CODES[exit_regime(scene)]
         fast = None if h_guess is not None else _fast_guess(scene, opts.h_min, opts.h_max,
