@@ -91,6 +91,7 @@ __all__ = [
     "PLAN_PAIR",
     "PLAN_SINGLE",
     "POINTS_SHAPE",
+    "REFINE_SPREAD",
     "REGIME_FADING",
     "REGIME_STEADY",
     "REGIME_STOPS_SLIDING",
@@ -114,6 +115,20 @@ MELT_SHIFT_FACTOR = 2.5
 #: scripts/fast_tier_error.py after :data:`skidmc.physics.fast.STOPS_SLIDING_FACTOR`,
 #: rounded up. A guess further off costs doubling steps, never a wrong root.
 FAST_STOPS_SLIDING_SPREAD = 0.02
+
+#: Spread of a refined pair's new fine root about the root the pair predicts for its level
+#: (``value`` of :func:`skidmc.solver.controller.next_round`, REFINE), in units of
+#: |c| + x_tol (c the pair's relative correction, x_tol the new search's root tolerance): the
+#: prior of that search where the margin jumps (:func:`skidmc.solver.finders.
+#: prior_bisection_start`), centred on the prediction. ``python scripts/refine_prior.py``
+#: (135 refined searches of 452 stops-sliding scenes drawn from the shipped studies, seeds
+#: 101-103, rtol 1e-3 and 3e-3): (ln H - ln value) / (|c| + x_tol) has mean -0.05, sd 0.18,
+#: median -0.01, range -0.57..+0.35 (at 1e-3: mean -0.01, sd 0.14); rounded up to 0.2. The
+#: prior it replaces (centred half the search's overshoot above the prediction, spread a sixth
+#: of it: +0.35 and 0.12 in these units, set by analogy with the first pair's fine search,
+#: whose root lies above its coarse one) put the roots at -3.3 of its spreads on average. A
+#: root farther out costs doubling steps, never a wrong root.
+REFINE_SPREAD = 0.2
 
 #: Shift [1, in ln H] of the root's prior above the fast tier's height on rebound scenes whose
 #: heating fades before the exit (sliding speed at rebound below
@@ -339,6 +354,9 @@ def _one_begin(s, res, pts, st, fpts, level, x_tol, guess, overshoot, slope, go_
             center, spread = math.log(guess) + FADING_FAST_SHIFT, FADING_FAST_SPREAD
         elif s.from_fast == 1:
             center, spread = math.log(guess), FAST_STOPS_SLIDING_SPREAD
+        elif s.stage == _S_REFINE and n_known == 0:
+            # The root the refined pair predicts for this level: the prior's centre.
+            center, spread = math.log(guess), sigma
         else:
             half = 0.5 * _or_default(overshoot, FAST_GUESS_ERROR)
             center, spread = math.log(guess) + half, _or_default(sigma, half / 3.0)
@@ -686,7 +704,7 @@ def _round(s, res, pts, st, fpts):
         s.stage = _S_REFINE
         return _search_begin(s, res, pts, st, fpts, 1, s.fine_level, s.next_fine_tol, s.value,
                              0.5 * abs(s.relative) + s.next_fine_tol, slope, go_slope,
-                             math.nan, 0)
+                             REFINE_SPREAD * (abs(s.relative) + s.next_fine_tol), 0)
     return _finish(s, res)   # STOP: nothing left that can help
 
 
