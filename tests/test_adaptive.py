@@ -8,6 +8,8 @@ its own simulations; a melting width whose measured bias exceeds its share is na
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from test_extremes import _rate_at_ref
 
@@ -141,6 +143,45 @@ def test_a_tightened_root_reuses_its_simulations(monkeypatch):
     assert len(full) == len(set(full))          # never the same run twice
     assert res.evaluations <= len(runs)
     assert len(res.history) == len({h for h, _ in res.history})
+    assert res.error_estimate <= 1e-3
+
+
+def test_a_finder_that_gives_up_inside_a_bracket_hands_it_to_brent(monkeypatch):
+    # A sobol-series1 sample on the fused-quartz table (seed 45 of benchmarks/study_scenes.py,
+    # rounded) whose fast-tier guess is ~2x the root: the coarse go-side search reaches its 8
+    # simulations with a bracket of ~1.6 % in hand, and gives up. Brent's method must start on
+    # that bracket: before, it bracketed again from the guess (6 more runs, 18 in all). No run
+    # of a model may then fall outside the tightest bracket its earlier full runs hold.
+    from skidmc.solver import search
+
+    scene = get_preset("paper-quartz").replace(
+        {"target": "fused-quartz"}, check_plausible=False).replace(
+        mu=0.13768, flow_stress=1.8694e8, billet_mass=8.6092, angle=60.897,
+        initial_temperature=295.47, he_heat_capacity=1191.66, he_conductivity=0.38218,
+        kinetics_prefactor=3.18027e10, kinetics_activation_temperature=15518.16,
+        kinetics_heat_of_reaction=3.58269e6, target_conductivity=1.34564,
+        check_plausible=False)
+    runs = []
+    simulate = search.simulate
+
+    def recording_simulate(model, height, **kw):
+        sim = simulate(model, height, **kw)
+        runs.append((id(model), height, sim.margin, kw.get("until_exit", False)))
+        return sim
+
+    monkeypatch.setattr(search, "simulate", recording_simulate)
+    res = critical_height(scene, rtol=1e-3)
+    assert "temperature_target" in res.flags
+    outside = []
+    for i, (model, height, _, _) in enumerate(runs):
+        before = [(h, m) for mo, h, m, until_exit in runs[:i] if mo == model and not until_exit]
+        lo = max((h for h, m in before if m > 0.0), default=0.0)
+        hi = min((h for h, m in before if m <= 0.0), default=math.inf)
+        if lo < hi and not lo < height < hi:
+            outside.append((i, height, lo, hi))
+    assert not outside, outside
+    coarse = [r for r in runs if r[0] == runs[0][0]]
+    assert len(coarse) == 10, [h for _, h, _, _ in coarse]   # 8 go-side runs, 2 of Brent's
     assert res.error_estimate <= 1e-3
 
 

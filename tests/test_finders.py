@@ -29,6 +29,37 @@ def test_normal_functions_equal_statistics_normaldist_bit_for_bit():
     assert all(finders.normal_quantile(p) == dist.inv_cdf(p) for p in ps if p > 0.0)
 
 
+@pytest.mark.parametrize("shape", ["linear", "capped"])
+def test_brent_on_a_known_bracket_is_scipy_brentq_on_it(shape):
+    # brent_bracket_start: a bracket handed on by a finder that gave up inside it. The points
+    # asked and the root are scipy's brentq on that bracket, bit for bit, and nothing outside.
+    root, x_tol, horizon = 0.4137, 3e-4, 0.7
+    lo, hi = 0.39, 0.45
+
+    def f(x):
+        d = x - root
+        return (math.inf if d < -0.01 else -1.1 * d) if shape == "capped" else -1.2 * d
+
+    st = np.zeros(1, dtype=FINDER_STATE)
+    finders.finder_reset(st)
+    code, value = finders.brent_bracket_start(st, lo, f(lo), hi, f(hi), -5.0, 5.0, x_tol,
+                                              horizon)
+    asked = []
+    while code == ASK:
+        asked.append(value)
+        code, value = finders.finder_step(st, np.empty((2, 1)), f(value))
+    assert code == ROOT
+    assert all(lo < x < hi for x in asked)
+
+    def bounded(x):
+        m = f(x)
+        return m if math.isfinite(m) else 2.0 * horizon + 1.0
+
+    g, calls = _recording(bounded)
+    assert value == brentq(g, lo, hi, xtol=x_tol, rtol=4 * np.finfo(float).eps)
+    assert asked == calls[2:]
+
+
 def _recording(f):
     calls = []
 

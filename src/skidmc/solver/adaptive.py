@@ -60,6 +60,7 @@ from skidmc.solver.finders import (
     JUMP_SLOPE,
     ROOT,
     bisection_start,
+    brent_bracket_start,
     brent_start,
     finder_point,
     finder_reset,
@@ -398,6 +399,21 @@ def _one_pump(s, res, pts, st, fpts, code, value):
             s.n = kept
             s.one, s.signs_only = _ONE_BRENT, 0
             finder_reset(st)
+            # Where the kept runs already bracket the root, every no-go run below every go
+            # run, Brent's method starts on that bracket (the finder gave up inside it, at
+            # its simulation limit or on a fold); otherwise it brackets from the guess.
+            lo, hi = -1, -1
+            for i in range(kept):
+                if p[P_M, i] > 0.0:
+                    if lo < 0 or p[P_X, i] > p[P_X, lo]:
+                        lo = i
+                elif hi < 0 or p[P_X, i] < p[P_X, hi]:
+                    hi = i
+            if lo >= 0 and hi >= 0 and p[P_X, lo] < p[P_X, hi]:
+                code, value = brent_bracket_start(st, p[P_X, lo], p[P_M, lo], p[P_X, hi],
+                                                  p[P_M, hi], s.x_min, s.x_max, s.x_tol,
+                                                  s.horizon)
+                continue
             guess = s.guess
             x0 = math.log(guess) if guess == guess and guess != 0.0 else 0.0   # 1 m by default
             code, value = brent_start(st, x0, s.x_min, s.x_max, s.x_tol, s.horizon,

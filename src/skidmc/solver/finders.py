@@ -61,6 +61,7 @@ __all__ = [
     "ROOT",
     "SIGN_ERROR",
     "bisection_start",
+    "brent_bracket_start",
     "brent_start",
     "finder_point",
     "finder_reset",
@@ -350,7 +351,7 @@ def guided_start(st, x0, slope, x_tol, x_min, x_max, max_simulations, spread):
 
     Gives up (:data:`GIVE_UP`) when a step leaves (x_min, x_max), meets a non-finite margin,
     finds the margin not monotone, or does not converge within ``max_simulations``: the caller
-    then brackets and runs Brent's method, reusing every simulation.
+    then runs Brent's method on the bracket its full runs hold (or brackets from the guess).
     """
     return _guided_begin(st[0], x0, slope, x_tol, x_min, x_max, max_simulations, spread)
 
@@ -656,6 +657,21 @@ def brent_start(st, x0, x_min, x_max, x_tol, horizon, overshoot):
     s.count = 0
     s.limit = BRACKET_STEPS
     return _bracket_next(s, _py_min(_py_max(x0, x_min), x_max))
+
+
+@njit(cache=True)
+def brent_bracket_start(st, lo_x, lo_m, hi_x, hi_m, x_min, x_max, x_tol, horizon):
+    """Brent's method on a bracket known beforehand: a no-go point (``lo_x``, ``lo_m`` > 0)
+    below a go point (``hi_x``, ``hi_m`` <= 0), ln H [1] and margins [1]; otherwise as
+    :func:`brent_start` after its bracketing steps (a guided finder that gave up within a
+    bracket hands it on, instead of bracketing again from its first guess)."""
+    s = st[0]
+    s.mode = _BRACKET
+    s.x_min, s.x_max, s.x_tol = x_min, x_max, x_tol
+    s.horizon = horizon
+    s.has_lo, s.lo_x, s.lo_m = 1, lo_x, lo_m
+    s.has_hi, s.hi_x, s.hi_m = 1, hi_x, hi_m
+    return _brent_begin(s)
 
 
 @njit(cache=True)
