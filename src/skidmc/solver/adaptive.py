@@ -402,17 +402,12 @@ def _one_pump(s, res, pts, st, fpts, code, value):
             # Where the kept runs already bracket the root, every no-go run below every go
             # run, Brent's method starts on that bracket (the finder gave up inside it, at
             # its simulation limit or on a fold); otherwise it brackets from the guess.
-            lo, hi = -1, -1
             for i in range(kept):
-                if p[P_M, i] > 0.0:
-                    if lo < 0 or p[P_X, i] > p[P_X, lo]:
-                        lo = i
-                elif hi < 0 or p[P_X, i] < p[P_X, hi]:
-                    hi = i
-            if lo >= 0 and hi >= 0 and p[P_X, lo] < p[P_X, hi]:
-                code, value = brent_bracket_start(st, p[P_X, lo], p[P_M, lo], p[P_X, hi],
-                                                  p[P_M, hi], s.x_min, s.x_max, s.x_tol,
-                                                  s.horizon)
+                finder_point(st, fpts, p[P_X, i], p[P_M, i])
+            f = st[0]
+            if f.has_lo == 1 and f.has_hi == 1 and f.lo_x < f.hi_x:
+                code, value = brent_bracket_start(st, f.lo_x, f.lo_m, f.hi_x, f.hi_m, s.x_min,
+                                                  s.x_max, s.x_tol, s.horizon)
                 continue
             guess = s.guess
             x0 = math.log(guess) if guess == guess and guess != 0.0 else 0.0   # 1 m by default
