@@ -11,13 +11,16 @@ which was not used to choose it (they hold its two farthest roots).
 from __future__ import annotations
 
 import math
+import sys
 
 import pytest
+from conftest import ROOT
 
 from skidmc import critical_height, make_scene
-from skidmc.solver import adaptive, search
 from skidmc.solver.adaptive import REFINE_SPREAD
-from skidmc.solver.simulate import simulate
+
+sys.path.insert(0, str(ROOT / "scripts"))
+from refine_prior import Recorder, sign_root  # noqa: E402
 
 _COMMON = {"billet_diameter": 0.254, "he.density": 1910.0, "he.heat_of_fusion": 209200.0,
            "he.melting_point": 553.0, "target.density": 19300.0,
@@ -58,71 +61,45 @@ def _scene(label):
                       configuration="vertical", check_plausible=False)
 
 
-def _refined_search(scene, rtol, monkeypatch):
+def _refined_search(scene, rtol):
     """The search's refine (prediction [m], relative correction, root tolerance, the prior's
-    spread, from the machine's state when the new fine search starts) and its runs."""
-    step, sim = adaptive.pair_step, search.simulate
-    seen, runs = {}, []
-
-    def pair_step(ps, *args):
-        out = step(ps, *args)
-        p = ps[0]
-        if not seen and int(p["stage"]) == adaptive._S_REFINE:
-            seen.update(value=float(p["l_guess"]), relative=float(p["relative"]),
-                        x_tol=float(p["level_tol"]), sigma=float(p["l_sigma"]),
-                        signs=int(p["signs_only"]), first=len(runs))
-        return out
-
-    def record(model, height, **kw):
-        out = sim(model, height, **kw)
-        runs.append((model, math.log(height), out.margin))
-        return out
-
-    monkeypatch.setattr(adaptive, "pair_step", pair_step)
-    monkeypatch.setattr(search, "simulate", record)
-    result = critical_height(scene, rtol=rtol)
-    monkeypatch.undo()
-    return result, seen, runs[seen["first"]:] if seen else []
-
-
-def _sign_root(model, lo, hi, tol=1e-7):
-    while hi - lo > tol:
-        mid = 0.5 * (lo + hi)
-        if simulate(model, math.exp(mid), until_exit=True).margin <= 0.0:
-            hi = mid
-        else:
-            lo = mid
-    return 0.5 * (lo + hi)
+    spread, read from the machine's state when the new fine search starts) and the runs from
+    there on as (model, ln H, margin): scripts/refine_prior.py's recorder."""
+    with Recorder() as rec:
+        result = critical_height(scene, rtol=rtol)
+    seen = rec.refine or {}
+    runs = [(mo, math.log(h), m) for mo, h, m, _ in rec.runs[seen.get("n_before", 0):]]
+    return result, seen, runs if seen else []
 
 
 @pytest.mark.parametrize("rtol", [1e-3, 3e-3])
 @pytest.mark.parametrize("label", list(HELD_OUT))
-def test_the_refined_root_lies_within_the_prior(label, rtol, monkeypatch):
-    result, seen, runs = _refined_search(_scene(label), rtol, monkeypatch)
+def test_the_refined_root_lies_within_the_prior(label, rtol):
+    result, seen, runs = _refined_search(_scene(label), rtol)
     assert "stops_sliding" in result.flags
     assert seen and seen["signs"] == 1, "the search did not refine by signs"
     scale = abs(seen["relative"]) + seen["x_tol"]
     assert seen["sigma"] == pytest.approx(REFINE_SPREAD * scale, rel=1e-12)
     model = runs[0][0]
     level_runs = [(x, m) for mo, x, m in runs if mo is model]
-    root = _sign_root(model, max(x for x, m in level_runs if m > 0.0),
+    root = sign_root(model, max(x for x, m in level_runs if m > 0.0),
                       min(x for x, m in level_runs if m <= 0.0))
     # The prior's centre is the prediction; on the training draws the roots lay within 2.85
     # spreads of it (-0.57..+0.35 (|c| + x_tol)), so 3 spreads.
     z = (root - math.log(seen["value"])) / seen["sigma"]
     assert abs(z) <= 3.0, z
-    # The search's own root is within its tolerance of the tight one.
+    # The tight root lies within the runs the search made at that level.
     x_found = [x for x, m in level_runs]
     assert min(x_found) <= root <= max(x_found)
 
 
-def test_refined_searches_take_fewer_runs_at_their_level(monkeypatch):
+def test_refined_searches_take_fewer_runs_at_their_level():
     # Before the measured prior (centred +0.35 (|c| + x_tol) above the prediction, spread
     # 0.12), these six refined searches took 40 runs at their new level (3-8 each); with it 25.
     # Each run there costs ~5x one of the level below (results/validation/refine_prior.md).
     total = 0
     for label in HELD_OUT:
         for rtol in (1e-3, 3e-3):
-            _, seen, runs = _refined_search(_scene(label), rtol, monkeypatch)
+            _, seen, runs = _refined_search(_scene(label), rtol)
             total += sum(1 for mo, _, _ in runs if mo is runs[0][0])
     assert total <= 30, total
