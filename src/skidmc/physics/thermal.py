@@ -256,11 +256,17 @@ def prefix_melt_z(tol_temperature, rho_c, latent_v):
 
 
 @njit(**_JIT, inline="always")
+def _contact_flux(t, q0, s, c, w):
+    """Frictional flux during the contact [W/m^2]: q0 max(s - c (1 - cos w t), 0) (Eq. 10)."""
+    v = s - c * (1.0 - math.cos(w * t))
+    return q0 * v if v > 0.0 else 0.0
+
+
+@njit(**_JIT, inline="always")
 def _flux(t, q0, s, c, w, t_exit, q_ext):
-    """Frictional flux q(t) [W/m^2]: q0 (s - c (1 - cos w t)) on [0, t_exit), then q_ext."""
+    """Frictional flux q(t) [W/m^2]: :func:`_contact_flux` on [0, t_exit), then q_ext."""
     if t < t_exit:
-        v = s - c * (1.0 - math.cos(w * t))
-        return q0 * v if v > 0.0 else 0.0
+        return _contact_flux(t, q0, s, c, w)
     return q_ext
 
 
@@ -1248,6 +1254,11 @@ def simulate_core(inp, out, width, rho_c, face_conductance, state, history, reco
     robin = 0.0
     drive = 0.0
 
+    # The flux at t_exit from the left (the contact's last step ends there), and whether the
+    # extension flux jumps from it.
+    q_exit_left = _contact_flux(t_exit, q0, slide_s, slide_c, omega)
+    exit_jump = abs(q_ext - q_exit_left) > 1e-6 * abs(q0)
+
     t = 0.0
     dt = dt_initial
     dt_prev = dt_initial
@@ -1306,7 +1317,14 @@ def simulate_core(inp, out, width, rho_c, face_conductance, state, history, reco
         for j in range(n_he):
             hist_y[j] = a1 * y[j] - a2 * y_prev[j]
 
-        q = _flux(t_new, q0, slide_s, slide_c, omega, t_exit, q_ext)
+        if t < t_exit <= t_new:
+            # A step that ends on t_exit integrates the contact's flux up to it: BDF2 takes
+            # the flux at the step's end, so it takes the left limit there, not q_ext. (With
+            # q_ext the extension's jump fell into the contact's last step: its error estimate
+            # rejected such steps, and the retries crept up to t_exit in shrinking steps.)
+            q = q_exit_left
+        else:
+            q = _flux(t_new, q0, slide_s, slide_c, omega, t_exit, q_ext)
         q_target = bdt * (1.0 - q_share_he) * q
         q_he = bdt * q_share_he * q
         if exact_target:
@@ -1422,8 +1440,7 @@ def simulate_core(inp, out, width, rho_c, face_conductance, state, history, reco
 
         dt = _next_step(dt, n_hist, err, tol_temperature)
         # A jump of the flux at t_exit restarts the multistep history with a small step.
-        if t == t_exit and abs(q_ext - _flux(t_exit * (1.0 - 1e-12), q0, slide_s, slide_c,
-                                             omega, t_exit, q_ext)) > 1e-6 * abs(q0):
+        if t == t_exit and exit_jump:
             n_hist = 0
             dt = dt_initial
         if recording:
