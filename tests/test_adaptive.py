@@ -147,42 +147,54 @@ def test_a_tightened_root_reuses_its_simulations(monkeypatch):
 
 
 def test_a_finder_that_gives_up_inside_a_bracket_hands_it_to_brent(monkeypatch):
-    # A sobol-series1 sample on the fused-quartz table (seed 45 of benchmarks/study_scenes.py,
-    # rounded) whose fast-tier guess is ~2x the root: the coarse go-side search reaches its 8
-    # simulations with a bracket of ~1.6 % in hand, and gives up. Brent's method must start on
-    # that bracket: before, it bracketed again from the guess (6 more runs, 18 in all). No run
-    # of a model may then fall outside the tightest bracket its earlier full runs hold.
+    # The runs answer from a margin of our own (the machine reads a run's margin and event
+    # only): roots r_L = r + 1e-3 (34 / cells)^2 [ln H] at each level; at the coarse level a go
+    # side twice as steep as the finder's default slope (-2.5 against -1.25) and no event at all
+    # (margin inf) more than 0.01 below the root. From its first go run 0.1 above the root the
+    # go-side finder extrapolates along the default slope to 0.04 below it, gets no event there
+    # and gives up, holding the bracket those two runs make. Brent's method must start on that
+    # bracket: before (issue 45), it bracketed again from the guess, outside it. No run of a
+    # model may fall outside the tightest bracket its earlier full runs hold.
+    from types import SimpleNamespace
+
     from skidmc.solver import search
 
-    scene = get_preset("paper-quartz").replace(
-        {"target": "fused-quartz"}, check_plausible=False).replace(
-        mu=0.13768, flow_stress=1.8694e8, billet_mass=8.6092, angle=60.897,
-        initial_temperature=295.47, he_heat_capacity=1191.66, he_conductivity=0.38218,
-        kinetics_prefactor=3.18027e10, kinetics_activation_temperature=15518.16,
-        kinetics_heat_of_reaction=3.58269e6, target_conductivity=1.34564,
-        check_plausible=False)
-    runs = []
-    simulate = search.simulate
+    runs, root = [], []
 
-    def recording_simulate(model, height, **kw):
-        sim = simulate(model, height, **kw)
-        runs.append((id(model), height, sim.margin, kw.get("until_exit", False)))
-        return sim
+    def margin(cells, x):
+        d = x - (root[0] + 1e-3 * (34 / cells) ** 2)
+        if cells > 34:
+            return -1.2 * d if d >= 0.0 else -0.8 * d
+        if d < -0.01:
+            return math.inf
+        return -2.5 * d if d >= 0.0 else -1.5 * d
 
-    monkeypatch.setattr(search, "simulate", recording_simulate)
-    res = critical_height(scene, rtol=1e-3)
-    assert "temperature_target" in res.flags
+    def fake_simulate(model, height, **kw):
+        x = math.log(height)
+        if not root:
+            root.append(x - 0.1)   # the first coarse run lands 0.1 above the coarse root
+        m = margin(len(model.width), x)
+        runs.append((len(model.width), height, m))
+        return SimpleNamespace(margin=m, event=math.isfinite(m))
+
+    monkeypatch.setattr(search, "simulate", fake_simulate)
+    res = critical_height(get_preset("paper-quartz"), rtol=1e-3)
     outside = []
-    for i, (model, height, _, _) in enumerate(runs):
-        before = [(h, m) for mo, h, m, until_exit in runs[:i] if mo == model and not until_exit]
+    for i, (cells, height, _) in enumerate(runs):
+        before = [(h, m) for c, h, m in runs[:i] if c == cells]
         lo = max((h for h, m in before if m > 0.0), default=0.0)
         hi = min((h for h, m in before if m <= 0.0), default=math.inf)
         if lo < hi and not lo < height < hi:
             outside.append((i, height, lo, hi))
     assert not outside, outside
-    coarse = [r for r in runs if r[0] == runs[0][0]]
-    assert len(coarse) == 10, [h for _, h, _, _ in coarse]   # 8 go-side runs, 2 of Brent's
-    assert res.error_estimate <= 1e-3
+    coarse = [(h, m) for c, h, m in runs if c == 34]
+    # The finder's two runs, the second without an event, then Brent's inside their bracket.
+    assert coarse[0][1] < 0.0 and coarse[1][1] == math.inf
+    assert coarse[1][0] < min(h for h, _ in coarse[2:]) <= max(h for h, _ in coarse[2:]) \
+        < coarse[0][0]
+    # And the search ends on the fine level's root, within its error estimate.
+    fine_root = math.exp(root[0] + 1e-3 * (34 / 68) ** 2)
+    assert abs(math.log(res.critical_height / fine_root)) <= res.error_estimate
 
 
 def test_a_melting_bias_above_its_share_narrows_the_width():

@@ -175,3 +175,32 @@ def test_history_slopes_read_a_finished_search():
     assert margin_slope([(1.0, 0.1), (2.0, 0.05)]) is None   # no sign change
     assert go_side_slope([(1.0, -0.1), (2.0, -0.05)]) is None   # rising: not a go side
     assert margin_slope([]) is None and go_side_slope([]) is None
+
+
+def _go_side_margin(root, slope, kappa):
+    """A go side that bends by ``kappa`` (a secant through go points at d_a, d_b above the root
+    misses it by kappa d_a d_b) above ``root``, and a no-go side 30 % less steep below it."""
+    def margin(x):
+        d = x - root
+        return slope * d + kappa * abs(slope) * d * d if d >= 0.0 else 0.7 * slope * d
+    return margin
+
+
+def test_go_side_runs_aim_by_a_typical_bend_and_accept_by_the_worst():
+    # A temperature-dependent target's coarse search (paper-series1[16338]:alumina-85, the
+    # tail's draw): go-side slope -1.08, little bend, the fast tier's guess 6 % above the root.
+    root, x_tol = math.log(5.2105), 3e-4
+    g, calls = _recording(_go_side_margin(root, -1.08, 0.2))
+    found = go_side_root(g, root + 0.06, None, x_tol, -1.0, 5.0, guess_error=0.02)
+    # Aimed by the worst bend (GO_BEND) the runs crept down from above: 6 of them (0.08, 0.032,
+    # 0.026, 0.0083, 0.0021, 0.0004 above the root); aimed by GO_AIM_BEND, 4.
+    assert len(calls) <= 4
+    assert abs(found - root) <= 0.5 * x_tol
+    # Accepting a root is still decided by GO_BEND: on go sides bent up to the largest kappa
+    # measured at the default pairs' levels (6.8) and guesses off either way, each root found
+    # lies within x_tol (the finder may give up instead: the search then runs Brent's method).
+    for kappa in (0.0, 0.66, 2.0, 6.8):
+        for off in (-0.03, 0.02, 0.06, 0.12):
+            found = go_side_root(_go_side_margin(root, -1.08, kappa), root + off, None, x_tol,
+                                 -1.0, 5.0, guess_error=0.02)
+            assert found is None or abs(found - root) <= x_tol, (kappa, off, found)

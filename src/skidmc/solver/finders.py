@@ -50,6 +50,7 @@ __all__ = [
     "FINDER_STATE",
     "FOLD_SLOPE",
     "GIVE_UP",
+    "GO_AIM_BEND",
     "GO_BEND",
     "GO_MIN_SEPARATION",
     "GO_SECANT_SPAN",
@@ -109,6 +110,16 @@ GO_MIN_SEPARATION = 2e-3
 #: ~1.5e-3 between heights 0.1 % apart (kappa up to ~340 there): its discretisation, which the
 #: Richardson estimate of a pair (0, 1) covers, not a bend any secant could model.
 GO_BEND = 10.0
+#: The bend a go-side run is aimed by [1]: each run aims above the secant's root by
+#: GO_AIM_BEND * d_a * d_b (at least ``1.5 x_tol``), a typical bend rather than the worst one
+#: (:data:`GO_BEND` still decides when a secant's root is accepted). The median, over the scenes
+#: and the levels of the default pairs (0.5, 1.5 and 2.5; results/validation/go_side_bend.md),
+#: of each scene and level's largest kappa is 0.66. Aimed by GO_BEND, the runs crept down on the
+#: root from far above: on temperature-dependent targets, whose go side bends little (kappa
+#: ~0.2), the coarse search took 6 go runs where the secant had the root to 5e-4 after 2. A run
+#: aimed too low lands on the no-go side and closes a bracket, which is accepted as before:
+#: it costs runs, never a root.
+GO_AIM_BEND = 0.66
 #: Steepest secant [1, d margin / d ln H] across a bracket of a margin that is smooth through
 #: its root: t_ev ~ H^-s gives |slope| 1.1-1.35 on the go side, ~30 % less on the no-go side.
 #: A jump (the event before the heating fades, or never) gives 0.3-0.5 of margin over a
@@ -438,9 +449,10 @@ def go_side_start(st, pts, x_guess, slope, x_tol, x_min, x_max, guess_error, max
     below ``x_tol / 2``. The secant uses the farthest go point within :data:`GO_SECANT_SPAN`,
     which keeps the margin's ~1e-5 step-size noise out of the slope.
 
-    Each simulation aims just above the predicted root, by the prediction's own uncertainty
-    (at least ``1.5 x_tol``), so that it lands on the go side: from a coarse level's root and
-    slope this usually takes 2 simulations, from the fast tier's height 3. A no-go point
+    Each simulation aims just above the predicted root, by the prediction's typical error (at
+    least ``1.5 x_tol``; a secant's by :data:`GO_AIM_BEND`, one point's by its slope's error),
+    so that it lands on the go side: from a coarse level's root and slope this usually takes 2
+    simulations, from the fast tier's height 3-4. A no-go point
     only bounds the root from below (and closes a bracket, accepted by linear interpolation
     when it is ``4 x_tol`` wide). A bracket across which the margin jumps or folds goes to
     :func:`guided_start`. Gives up when the steps leave (x_min, x_max), meet a non-finite
@@ -520,7 +532,7 @@ def _go_side_tell(s, pts, m):
             if (xa - root <= 4.0 * s.x_tol or bend <= 0.5 * s.x_tol) and (
                     s.has_lo == 0 or root >= s.lo_x):
                 return ROOT, root
-            uncertainty = _py_max(push, bend)
+            uncertainty = _py_max(push, GO_AIM_BEND * (xa - root) * (xb - root))
         else:
             root = xa - ma / s.slope
             # Extrapolating with a slope known to slope_error misses the root by about
