@@ -204,3 +204,17 @@ def test_go_side_runs_aim_by_a_typical_bend_and_accept_by_the_worst():
             found = go_side_root(_go_side_margin(root, -1.08, kappa), root + off, None, x_tol,
                                  -1.0, 5.0, guess_error=0.02)
             assert found is None or abs(found - root) <= x_tol, (kappa, off, found)
+
+
+def test_a_go_run_at_the_root_is_bracketed_from_just_below_it():
+    # A temperature-dependent target's coarse search (sobol-series1[56313]:alumina-85, seed 46
+    # of benchmarks/study_scenes.py): the fast tier's guess 3.6 % low, a no-go run 1.6 % below
+    # the root, then a go run 0.014 % above it. Its prediction gives no progress (the root lies
+    # within a push of the go run); halving the way to the no-go run crept up on the root from
+    # below, a run per halving (6 runs in all). Two pushes below the go run close a bracket
+    # 3 x_tol wide at once: 3 runs.
+    root, x_tol = math.log(9.474), 3e-4
+    g, calls = _recording(lambda x: -(x - root) if x >= root else -0.97 * (x - root))
+    found = go_side_root(g, root - 0.0358, None, x_tol, -1.0, 5.0, guess_error=0.02)
+    assert len(calls) <= 3, [x - root for x in calls]
+    assert abs(found - root) <= x_tol

@@ -552,9 +552,15 @@ def _go_side_tell(s, pts, m):
                 uncertainty = push
         x = root + uncertainty
         if x >= xa - 0.5 * push:
-            # The prediction gives no progress: halve the way to the bracket's low end (or to
-            # the root predicted from below).
-            x = 0.5 * (xa + (s.lo_x if s.has_lo == 1 else root - uncertainty))
+            # The prediction gives no progress: the root lies within about a push below the
+            # closest go point. Step 2 pushes below it, to close a bracket 3 x_tol wide (the
+            # bracket's midpoint where that is closer); halving the way to a far no-go point
+            # crept up on the root from below, a run per halving. With no bracket, halve the
+            # way to the root predicted from below.
+            if s.has_lo == 1:
+                x = _py_max(0.5 * (xa + s.lo_x), xa - 2.0 * push)
+            else:
+                x = 0.5 * (xa + root - uncertainty)
     else:
         # Only no-go points: t_ev ~ H^-s predicts the root above; aim past it.
         root = s.lo_x - s.lo_m / s.slope
