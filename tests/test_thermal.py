@@ -16,6 +16,13 @@ def effusivity(k, rho, c):
     return math.sqrt(k * rho * c)
 
 
+def effusivity_sum(scene):
+    """e1 + e2, the HE's and the target's effusivities [W s^0.5 / (m^2 K)]."""
+    return (effusivity(scene.he_conductivity, scene.he_density, scene.he_heat_capacity)
+            + effusivity(scene.target_conductivity, scene.target_density,
+                         scene.target_heat_capacity))
+
+
 def inert_model(name, level):
     scene = get_preset(name)
     model = build_model(scene, level=level)
@@ -27,9 +34,7 @@ def inert_model(name, level):
 def test_constant_flux_surface_temperature(name):
     """T_b - T0 = 2 q sqrt(t) / (sqrt(pi) (e1 + e2)) for a constant flux q."""
     scene, model = inert_model(name, level=2)
-    e_sum = (effusivity(scene.he_conductivity, scene.he_density, scene.he_heat_capacity)
-             + effusivity(scene.target_conductivity, scene.target_density,
-                          scene.target_heat_capacity))
+    e_sum = effusivity_sum(scene)
     q = 5e7  # [W/m^2]
     t_end = model.exit_time
     sim = simulate(model, 1.0, record=True,
@@ -55,9 +60,7 @@ def _time_varying_flux_error(target):
     scene = get_preset("paper-alumina-smooth")
     model = dataclasses.replace(build_model(scene, level=2, target=target), prefactor=0.0,
                                 latent_heat=0.0)
-    e_sum = (effusivity(scene.he_conductivity, scene.he_density, scene.he_heat_capacity)
-             + effusivity(scene.target_conductivity, scene.target_density,
-                          scene.target_heat_capacity))
+    e_sum = effusivity_sum(scene)
     height = 7.0
     sim = simulate(model, height, record=True)
     q0 = model.flux_amplitude(height)
@@ -99,9 +102,7 @@ def _constant_flux_error(name, level, target):
     scene = get_preset(name)
     model = dataclasses.replace(build_model(scene, level=level, target=target), prefactor=0.0,
                                 latent_heat=0.0)
-    e_sum = (effusivity(scene.he_conductivity, scene.he_density, scene.he_heat_capacity)
-             + effusivity(scene.target_conductivity, scene.target_density,
-                          scene.target_heat_capacity))
+    e_sum = effusivity_sum(scene)
     q = 5e7  # [W/m^2]
     sim = simulate(model, 1.0, record=True,
                    flux_override=(q, 1.0, 0.0, model.omega, 10 * model.exit_time, q))
@@ -211,9 +212,7 @@ def test_run_up_to_the_exit_does_not_see_the_flux_after_it(target):
     # (measured at level 1: < 6e-4 of the rise on the exact target, 1.8e-3 on the meshed one,
     # so the meshed one gets 3e-3); a q_after leaking into the last step would show here only
     # within the step tolerance, so the identity above is the test's point.
-    e_sum = (effusivity(scene.he_conductivity, scene.he_density, scene.he_heat_capacity)
-             + effusivity(scene.target_conductivity, scene.target_density,
-                          scene.target_heat_capacity))
+    e_sum = effusivity_sum(scene)
     rise = 2 * q * math.sqrt(t_exit) / (math.sqrt(math.pi) * e_sum)
     at_exit = runs[2].interface_temperature[runs[2].times == t_exit]
     assert at_exit.size == 1
