@@ -54,6 +54,7 @@ from skidmc.solver.results import HeightResult
 __all__ = [
     "REFUSED_FLAGS",
     "SCENE_FIELDS",
+    "fast_height",
     "fast_critical_height",
     "fast_critical_heights",
     "fast_error_bound",
@@ -169,7 +170,47 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
     if strict and refused:
         raise SceneError("tier", "fast", f"the fast tier is refused where the scene is "
                          f"{', '.join(refused)} (use the full tier)")
-    args = list(_scene_values(scene))
+    height, censored, t_exit, ecode = fast_height(_scene_values(scene), error, h_min, h_max,
+                                                  melting=melting, c_ign=c_ign,
+                                                  melt_factor=melt_factor,
+                                                  stops_factor=stops_factor)
+    return HeightResult(critical_height=height, censored=censored, evaluations=0,
+                        flags=model.flags + model.height_flags(height),
+                        error_estimate=error, rtol=error, level=0.0,
+                        method="fast", exit_time=float(t_exit),
+                        exit_kind=_EXIT_NAMES[int(ecode)], terms=model.terms)
+
+
+def fast_height(values, error, h_min, h_max, *, melting=True, c_ign=C_IGNITION,
+                melt_factor=MELT_FACTOR, stops_factor=STOPS_SLIDING_FACTOR):
+    """The fast tier's height of a scene given as its values, censored within ``error``.
+
+    :func:`fast_critical_height` without its checks and result: what the full search's first
+    guess needs (``skidmc.solver.search``, which has the scene's flags already).
+
+    Parameters
+    ----------
+    values : sequence of float
+        The scene's values in the order of :data:`SCENE_FIELDS` [SI].
+    error : float
+        The tier's stated error for the scene [1] (:func:`fast_error_bound` of its flags).
+    h_min, h_max : float
+        Search bounds [m].
+    melting, c_ign, melt_factor, stops_factor
+        As :func:`fast_critical_height`.
+
+    Returns
+    -------
+    height : float
+        [m]; ``h_max`` or ``h_min`` where censored there.
+    censored : str or None
+        "above", "below" or None.
+    t_exit : float
+        [s].
+    exit_code : int
+        :data:`skidmc.physics.mechanics.EXIT_KINDS` index.
+    """
+    args = list(values)
     if not melting:
         args[10] = 0.0
     h, cens, t_exit, ecode, _ = fast_height_kernel(
@@ -180,11 +221,7 @@ def fast_critical_height(scene, h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_
     height, cens = censor_near_bounds(float(h), int(cens), error, float(h_min), float(h_max))
     censored = CENSOR_NAMES[int(cens)]
     height = {"above": h_max, "below": h_min}.get(censored, float(height))
-    return HeightResult(critical_height=height, censored=censored, evaluations=0,
-                        flags=model.flags + model.height_flags(height),
-                        error_estimate=error, rtol=error, level=0.0,
-                        method="fast", exit_time=float(t_exit),
-                        exit_kind=_EXIT_NAMES[int(ecode)], terms=model.terms)
+    return height, censored, float(t_exit), int(ecode)
 
 
 def fast_critical_heights(h_min=1e-3, h_max=1e4, *, melting=True, c_ign=C_IGNITION,

@@ -49,6 +49,7 @@ __all__ = [
     "PROPERTY_BUDGET_FRACTION",
     "Resolution",
     "SELF_HEATING_TIME",
+    "ModelBuilder",
     "SkidModel",
     "build_model",
     "elastic_target_reason",
@@ -65,6 +66,7 @@ __all__ = [
     "target_property_change",
     "target_property_table",
     "target_temperature_range",
+    "constant_properties",
     "constant_property_scene",
 ]
 
@@ -422,142 +424,214 @@ def build_model(scene, resolution=None, *, level=0.0, melting=True,
         raise SceneError("target", target, 'must be "mesh" or "exact"')
     if resolution is None:
         resolution = resolution_for_level(level, melt_width, melt_spread)
-    reason = elastic_target_reason(scene)
-    if reason is not None:
-        raise SceneError("target.hardness", scene.target_hardness, reason)
-    # The contact pressure: the billet's flow stress on a rigid target, the target's hardness
-    # where it yields first (docs/model.md, "Targets softer than the billet").
-    sigma = mechanics.contact_pressure(scene.flow_stress, scene.target_hardness)
-    mass = scene.billet_mass
-    diameter = scene.billet_diameter
-    mu = scene.mu
-    # The impact's constants from the one compiled definition the fast tier uses too.
-    omega, coefficient, t_exit, exit_code, slide_s, slide_c = mechanics.impact_constants(
-        mu, sigma, mass, diameter, scene.angle, scene.tilt)
-    t_c = 0.5 * math.pi / omega
-    exit_kind = mechanics.EXIT_KINDS[exit_code]
-    phi = math.radians(scene.angle)
+    return ModelBuilder(scene, melting=melting, runaway_fraction=runaway_fraction,
+                        horizon=horizon, target=target, rtol=rtol).model(resolution,
+                                                                         meshes=meshes)
 
-    terms = ["frictional_heating", "friction_spin"]
-    flags = []
-    if scene.tilt > 0.0:
-        terms.append("normal_force_spin")
-    if sigma < scene.flow_stress:
-        flags.append("yielding_target")
-    if exit_kind == "stops_sliding":
-        flags.append("stops_sliding")
-        if t_exit < EARLY_STOP_FRACTION * t_c:
-            flags.append("stops_early")
 
-    extension, mean_shape = flux_extension(omega, t_exit, slide_s, slide_c)
+class ModelBuilder:
+    """The models of one scene at any resolution: what :func:`build_model` infers from the
+    scene (the impact's mechanics, the terms and validity flags, the target's layers or
+    temperature table) done once, the meshes per resolution.
 
-    t_end = horizon * t_exit
-    heat_of_reaction = scene.kinetics_heat_of_reaction
-    prefactor = scene.kinetics_prefactor
-    t_a = scene.kinetics_activation_temperature
-    adiabatic_rise = heat_of_reaction / scene.he_heat_capacity
-    t_run = float(model_runaway_temperature(prefactor, t_a, adiabatic_rise, t_exit,
-                                            runaway_fraction))
+    A search builds its scene's model at every level and melting width it runs (~5 per
+    height); each is ``ModelBuilder(scene, ...).model(resolution)``, the same arithmetic as
+    :func:`build_model`, so a search that keeps one builder gets the same models to the last
+    bit for a fifth of the Python (docs/performance.md, issue 45's tenth pass).
 
-    t_ign, rest_time = _ignition_diagnostics(prefactor, t_a, adiabatic_rise,
-                                             scene.initial_temperature, t_exit)
-    if rest_time < SELF_HEATING_TIME:
-        flags.append("self_heating")
-    if t_ign > HOT_IGNITION_TEMPERATURE:
-        flags.append("hot_ignition")
-    if mu == 0.0:
-        terms = []
-        flags.append("no_friction")
+    Parameters
+    ----------
+    scene, melting, runaway_fraction, horizon, rtol
+        As :func:`build_model`.
+    target : {"mesh", "exact"} or None
+        As :func:`build_model`; None: given to each :meth:`model` instead (refused there, as
+        :func:`build_model` refuses it, where the exact target cannot carry the scene's).
 
-    latent = scene.he_heat_of_fusion if melting else 0.0
-    if latent > 0.0 and scene.he_melting_point < t_run:
-        if mu > 0.0:  # without friction nothing heats, so nothing melts
-            terms.append("melting")
-    else:
-        latent = 0.0
+    Attributes
+    ----------
+    terms, flags : tuple of str
+        The model's terms and scene validity flags (those of every model it builds).
+    exit_time : float
+        [s].
+    exit_kind : str
+    runaway_temperature : float
+        [K].
+    """
 
-    layers = target_layers(scene)
-    if layers is not None:
-        # Layers only where heat reaches below the top layer within the simulated time: a top
-        # deeper than the homogeneous target's mesh (DEPTH_DIFFUSION_LENGTHS sqrt(alpha t_end))
-        # leaves the meshed model unchanged, and the exact target's far field changes the
-        # height by less than measured in docs/targets.md.
-        top_alpha = layers[1][0] / layers[0][0]
-        if layers[2][0] >= DEPTH_DIFFUSION_LENGTHS * math.sqrt(top_alpha * t_end):
-            terms.append("top_layer_only")
-            flags.append("top_layer_only")
-            layers = None
+    def __init__(self, scene, *, melting=True, runaway_fraction=DEFAULT_RUNAWAY_FRACTION,
+                 horizon=HORIZON_EXIT_TIMES, target="mesh", rtol=1e-3):
+        if target not in ("mesh", "exact", None):
+            raise SceneError("target", target, 'must be "mesh" or "exact"')
+        self.scene, self.target, self.runaway_fraction = scene, target, runaway_fraction
+        reason = elastic_target_reason(scene)
+        if reason is not None:
+            raise SceneError("target.hardness", scene.target_hardness, reason)
+        # The contact pressure: the billet's flow stress on a rigid target, the target's hardness
+        # where it yields first (docs/model.md, "Targets softer than the billet").
+        sigma = mechanics.contact_pressure(scene.flow_stress, scene.target_hardness)
+        mass = scene.billet_mass
+        diameter = scene.billet_diameter
+        mu = scene.mu
+        # The impact's constants from the one compiled definition the fast tier uses too.
+        omega, coefficient, t_exit, exit_code, slide_s, slide_c = mechanics.impact_constants(
+            mu, sigma, mass, diameter, scene.angle, scene.tilt)
+        t_c = 0.5 * math.pi / omega
+        exit_kind = mechanics.EXIT_KINDS[exit_code]
+        phi = math.radians(scene.angle)
+
+        terms = ["frictional_heating", "friction_spin"]
+        flags = []
+        if scene.tilt > 0.0:
+            terms.append("normal_force_spin")
+        if sigma < scene.flow_stress:
+            flags.append("yielding_target")
+        if exit_kind == "stops_sliding":
+            flags.append("stops_sliding")
+            if t_exit < EARLY_STOP_FRACTION * t_c:
+                flags.append("stops_early")
+
+        extension, mean_shape = flux_extension(omega, t_exit, slide_s, slide_c)
+
+        t_end = horizon * t_exit
+        heat_of_reaction = scene.kinetics_heat_of_reaction
+        prefactor = scene.kinetics_prefactor
+        t_a = scene.kinetics_activation_temperature
+        adiabatic_rise = heat_of_reaction / scene.he_heat_capacity
+        t_run = float(model_runaway_temperature(prefactor, t_a, adiabatic_rise, t_exit,
+                                                runaway_fraction))
+
+        t_ign, rest_time = _ignition_diagnostics(prefactor, t_a, adiabatic_rise,
+                                                 scene.initial_temperature, t_exit)
+        if rest_time < SELF_HEATING_TIME:
+            flags.append("self_heating")
+        if t_ign > HOT_IGNITION_TEMPERATURE:
+            flags.append("hot_ignition")
+        if mu == 0.0:
+            terms = []
+            flags.append("no_friction")
+
+        latent = scene.he_heat_of_fusion if melting else 0.0
+        if latent > 0.0 and scene.he_melting_point < t_run:
+            if mu > 0.0:  # without friction nothing heats, so nothing melts
+                terms.append("melting")
         else:
-            terms.append("layered_target")
-            flags.append("layered_target")
-            if target == "exact":
-                raise SceneError("target", target, "the heat reaches below the target's top "
-                                 "layer: a layered target needs the meshed target "
-                                 "(target='mesh'; the default search chooses it)")
+            latent = 0.0
 
-    table = None
-    if getattr(scene, "target_table", ""):
-        if getattr(scene, "target_layers", ""):
-            raise SceneError("target.table", scene.target_table, "a temperature table applies "
-                             "to a homogeneous target; a stack's layers keep constant "
-                             "properties")
-        t_low, t_high = target_temperature_range(scene.initial_temperature, t_run)
-        change = target_property_change(scene, t_low, t_high)
-        if change > PROPERTY_BUDGET_FRACTION * rtol:
-            terms.append("temperature_target")
-            flags.append("temperature_target")
-            table = target_property_table(scene)
-            if target == "exact":
-                raise SceneError("target", target, "a temperature-dependent target needs the "
-                                 "meshed target (target='mesh'; the default search chooses "
-                                 "it)")
-        else:
-            terms.append("constant_target")
-            flags.append("constant_target")
-
-    kernel_table = np.zeros(0)
-    if meshes:
-        n_cells = resolution.cells_per_medium
-        width, rho_c, face, q_share_he = _meshes(scene, resolution, t_exit, t_end, prefactor,
-                                                 t_a)
+        layers = target_layers(scene)
         if layers is not None:
-            q_share_he = _layer_meshes(scene, layers, t_end, n_cells, width, rho_c, face)
-        if table is not None:
-            q_share_he, kernel_table = _table_meshes(scene, table, t_high, t_end, n_cells,
-                                                     width, rho_c, face)
-    else:
-        # No cells: the fields as the mesh arithmetic would leave them, without running it
-        # (the fast tier builds a mesh-less model for every result).
-        n_cells = 0
-        width, rho_c, face, q_share_he = np.empty(0), np.empty(0), np.empty(0), math.nan
-    target_effusivity = he_conductivity = 0.0
-    if target == "exact":
-        # The HE's cells and faces alone (the same HE mesh as the meshed target's); the
-        # target enters through Duhamel's integral.
-        width, rho_c, face = width[n_cells:].copy(), rho_c[n_cells:].copy(), face[n_cells:].copy()
-        n_cells, q_share_he = 0, math.nan
-        target_effusivity = math.sqrt(scene.target_conductivity * scene.target_density
-                                      * scene.target_heat_capacity)
-        he_conductivity = scene.he_conductivity
+            # Layers only where heat reaches below the top layer within the simulated time: a
+            # top deeper than the homogeneous target's mesh (DEPTH_DIFFUSION_LENGTHS
+            # sqrt(alpha t_end)) leaves the meshed model unchanged, and the exact target's far
+            # field changes the height by less than measured in docs/targets.md.
+            top_alpha = layers[1][0] / layers[0][0]
+            if layers[2][0] >= DEPTH_DIFFUSION_LENGTHS * math.sqrt(top_alpha * t_end):
+                terms.append("top_layer_only")
+                flags.append("top_layer_only")
+                layers = None
+            else:
+                terms.append("layered_target")
+                flags.append("layered_target")
+                if target == "exact":
+                    _refuse_exact("layered_target")
 
-    return SkidModel(
-        omega=omega, contact_time=t_c, exit_time=t_exit, exit_kind=exit_kind,
-        slide_s=slide_s, slide_c=slide_c,
-        flux_per_root_height=mu * sigma * math.sqrt(2.0 * mechanics.STANDARD_GRAVITY),
-        extension_flux_factor=extension, end_time=t_end,
-        width=width, rho_c=rho_c, face_conductance=face, n_target=n_cells,
-        q_share_he=q_share_he, he_density=scene.he_density, latent_heat=latent,
-        melting_point=scene.he_melting_point, prefactor=prefactor,
-        activation_temperature=t_a, heat_of_reaction=heat_of_reaction,
-        initial_temperature=scene.initial_temperature, runaway_temperature=t_run,
-        resolution=resolution, runaway_fraction=runaway_fraction,
-        dt_initial=1e-6 * t_exit, terms=tuple(terms), flags=tuple(flags),
-        ignition_temperature=t_ign, rest_time=rest_time, billet_diameter=diameter,
-        indent_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * math.cos(phi) / omega,
-        slide_per_root_height=math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * mean_shape * t_exit,
-        target_effusivity=target_effusivity, he_conductivity=he_conductivity,
-        target_table=kernel_table,
-    )
+        table = None
+        t_high = math.nan
+        if getattr(scene, "target_table", ""):
+            if getattr(scene, "target_layers", ""):
+                raise SceneError("target.table", scene.target_table, "a temperature table "
+                                 "applies to a homogeneous target; a stack's layers keep "
+                                 "constant properties")
+            t_low, t_high = target_temperature_range(scene.initial_temperature, t_run)
+            change = target_property_change(scene, t_low, t_high)
+            if change > PROPERTY_BUDGET_FRACTION * rtol:
+                terms.append("temperature_target")
+                flags.append("temperature_target")
+                table = target_property_table(scene)
+                if target == "exact":
+                    _refuse_exact("temperature_target")
+            else:
+                terms.append("constant_target")
+                flags.append("constant_target")
+
+        self.terms, self.flags = tuple(terms), tuple(flags)
+        self.exit_time, self.exit_kind, self.runaway_temperature = t_exit, exit_kind, t_run
+        self._layers, self._table, self._t_high, self._t_end = layers, table, t_high, t_end
+        # SkidModel's fields that do not depend on the resolution.
+        self._fields = dict(
+            omega=omega, contact_time=t_c, exit_time=t_exit, exit_kind=exit_kind,
+            slide_s=slide_s, slide_c=slide_c,
+            flux_per_root_height=mu * sigma * math.sqrt(2.0 * mechanics.STANDARD_GRAVITY),
+            extension_flux_factor=extension, end_time=t_end, he_density=scene.he_density,
+            latent_heat=latent, melting_point=scene.he_melting_point, prefactor=prefactor,
+            activation_temperature=t_a, heat_of_reaction=heat_of_reaction,
+            initial_temperature=scene.initial_temperature, runaway_temperature=t_run,
+            runaway_fraction=runaway_fraction, dt_initial=1e-6 * t_exit, terms=self.terms,
+            flags=self.flags, ignition_temperature=t_ign, rest_time=rest_time,
+            billet_diameter=diameter,
+            indent_per_root_height=(math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * math.cos(phi)
+                                    / omega),
+            slide_per_root_height=(math.sqrt(2.0 * mechanics.STANDARD_GRAVITY) * mean_shape
+                                   * t_exit))
+
+    def model(self, resolution, *, meshes=True, target=None):
+        """The scene's model at ``resolution`` [SkidModel] (:func:`build_model`): with its
+        meshes, or without them (``meshes=False``); ``target`` the builder's unless it was
+        built with None."""
+        if target is None:
+            target = self.target
+        elif self.target is not None and target != self.target:
+            raise ValueError(f"this builder models the target {self.target!r}, not {target!r}")
+        if target not in ("mesh", "exact"):
+            raise SceneError("target", target, 'must be "mesh" or "exact"')
+        if target == "exact" and self.target is None:
+            for term in ("layered_target", "temperature_target"):
+                if term in self.terms:
+                    _refuse_exact(term)
+        scene, layers, table = self.scene, self._layers, self._table
+        kernel_table = np.zeros(0)
+        if meshes:
+            f = self._fields
+            n_cells = resolution.cells_per_medium
+            width, rho_c, face, q_share_he = _meshes(scene, resolution, f["exit_time"],
+                                                     self._t_end, f["prefactor"],
+                                                     f["activation_temperature"])
+            if layers is not None:
+                q_share_he = _layer_meshes(scene, layers, self._t_end, n_cells, width, rho_c,
+                                           face)
+            if table is not None:
+                q_share_he, kernel_table = _table_meshes(scene, table, self._t_high,
+                                                         self._t_end, n_cells, width, rho_c,
+                                                         face)
+        else:
+            # No cells: the fields as the mesh arithmetic would leave them, without running it
+            # (the fast tier builds a mesh-less model for every result).
+            n_cells = 0
+            width, rho_c, face, q_share_he = np.empty(0), np.empty(0), np.empty(0), math.nan
+        target_effusivity = he_conductivity = 0.0
+        if target == "exact":
+            # The HE's cells and faces alone (the same HE mesh as the meshed target's); the
+            # target enters through Duhamel's integral.
+            width, rho_c, face = (width[n_cells:].copy(), rho_c[n_cells:].copy(),
+                                  face[n_cells:].copy())
+            n_cells, q_share_he = 0, math.nan
+            target_effusivity = math.sqrt(scene.target_conductivity * scene.target_density
+                                          * scene.target_heat_capacity)
+            he_conductivity = scene.he_conductivity
+        return SkidModel(
+            width=width, rho_c=rho_c, face_conductance=face, n_target=n_cells,
+            q_share_he=q_share_he, resolution=resolution, target_effusivity=target_effusivity,
+            he_conductivity=he_conductivity, target_table=kernel_table, **self._fields)
+
+
+def _refuse_exact(term):
+    """Raise the exact target's refusal of a scene with ``term`` (SceneError on "target")."""
+    if term == "layered_target":
+        raise SceneError("target", "exact", "the heat reaches below the target's top "
+                         "layer: a layered target needs the meshed target "
+                         "(target='mesh'; the default search chooses it)")
+    raise SceneError("target", "exact", "a temperature-dependent target needs the "
+                     "meshed target (target='mesh'; the default search chooses "
+                     "it)")
 
 
 def _meshes(scene, resolution, t_exit, t_end, prefactor, activation_temperature):
@@ -691,13 +765,19 @@ def constant_property_scene(scene, temperature):
     """The scene with constant target properties: k and c of its table at ``temperature`` [K]
     and no table (itself without one). The fast tier's guess for a temperature-dependent target,
     and the comparison in scripts/temperature_dependent_targets.py."""
-    table = target_property_table(scene)
-    if table is None:
+    if not getattr(scene, "target_table", ""):
         return scene
-    t, k, c = table
-    return scene.replace({"target.conductivity": float(np.interp(temperature, t, k)),
-                          "target.heat_capacity": float(np.interp(temperature, t, c)),
+    k, c = constant_properties(scene, temperature)
+    return scene.replace({"target.conductivity": k, "target.heat_capacity": c,
                           "target.table": ""}, check_plausible=False)
+
+
+def constant_properties(scene, temperature):
+    """The conductivity [W/(m K)] and specific heat capacity [J/(kg K)] of the scene's
+    temperature table at ``temperature`` [K]: what :func:`constant_property_scene` gives the
+    scene (the search's fast-tier guess takes them without making the scene)."""
+    t, k, c = target_property_table(scene)
+    return float(np.interp(temperature, t, k)), float(np.interp(temperature, t, c))
 
 
 def _table_meshes(scene, table, t_high, t_end, n_cells, width, rho_c, face):

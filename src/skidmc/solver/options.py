@@ -119,6 +119,10 @@ class SearchOptions:
     signs : bool
         The scene's margin is likely to jump at its root (:func:`margin_likely_jumps`; only
         the adaptive search uses it).
+    regime : str or None
+        How the scene's heating ends (:func:`exit_regime`), found once for the search; None
+        where no scene was resolved (a given model, or options made by hand: the search
+        finds it).
     """
 
     rtol: float
@@ -134,6 +138,7 @@ class SearchOptions:
     extrapolate: bool = False
     adaptive: bool = False
     signs: bool = False
+    regime: str | None = None
 
     @property
     def exact(self):
@@ -152,11 +157,15 @@ class SearchOptions:
 
 def resolve_options(scene, rtol, *, h_min, h_max, method="brent", level=None, extrapolate=None,
                     melting=True, runaway_fraction=None, model=None, melt_width=None,
-                    melt_spread=None, target=None):
+                    melt_spread=None, target=None, terms_of=None):
     """Check a full-tier search's arguments and resolve their defaults [SearchOptions].
 
     See :func:`skidmc.critical_height` for the arguments (``h_min`` < ``h_max`` are checked
     there). Raises :class:`skidmc.errors.SceneError` naming the argument and its value.
+    ``terms_of``: a function of no argument giving the scene's model terms at ``rtol`` with
+    the default runaway rule, where the caller has them (a
+    :class:`skidmc.solver.model.ModelBuilder`'s); by default a mesh-less model is built for
+    them.
     """
     if not (isinstance(rtol, (int, float)) and 0.0 < rtol < 0.5):
         raise SceneError("rtol", rtol, "must be a number in (0, 0.5)")
@@ -180,12 +189,15 @@ def resolve_options(scene, rtol, *, h_min, h_max, method="brent", level=None, ex
         # The exact target is homogeneous with constant properties: a stack whose heat
         # reaches below its top layer, or a target whose properties follow its temperature, is
         # meshed (docs/targets.md).
-        terms = build_model(scene, meshes=False, rtol=rtol).terms
+        terms = (build_model(scene, meshes=False, rtol=rtol).terms if terms_of is None
+                 else terms_of())
         layered = "layered_target" in terms or "temperature_target" in terms
         target = "exact" if adaptive and not layered else "mesh"
     elif target not in TARGETS:
         raise SceneError("target", target, f"expected one of {', '.join(TARGETS)}")
-    signs = adaptive and margin_likely_jumps(scene)
+    # How the heating ends, once (margin_likely_jumps: any regime but "steady").
+    regime = exit_regime(scene) if model is None else None
+    signs = adaptive and regime != "steady"
     if adaptive:
         level, extrapolate = first_pair_level(rtol, target == "exact", signs), True
     elif level is None:
@@ -198,4 +210,5 @@ def resolve_options(scene, rtol, *, h_min, h_max, method="brent", level=None, ex
     return SearchOptions(rtol=rtol, h_min=h_min, h_max=h_max, method=method, melting=melting,
                          runaway_fraction=runaway_fraction, melt_width=float(melt_width),
                          melt_spread=float(melt_spread), target=target, level=level,
-                         extrapolate=extrapolate, adaptive=adaptive, signs=signs)
+                         extrapolate=extrapolate, adaptive=adaptive, signs=signs,
+                         regime=regime)

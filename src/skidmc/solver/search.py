@@ -22,6 +22,7 @@ import time
 
 from skidmc.errors import SceneError, SkidmcError
 from skidmc.physics.fast import CENSOR_NAMES
+from skidmc.physics.thermal import DEFAULT_RUNAWAY_FRACTION
 from skidmc.scene.scenes import Scene
 from skidmc.solver import adaptive
 from skidmc.solver.adaptive import (
@@ -43,9 +44,11 @@ from skidmc.solver.adaptive import (
 )
 from skidmc.solver.controller import MAX_ADAPTIVE_ROUNDS, first_root_tolerances
 from skidmc.solver.model import (
+    ModelBuilder,
     build_model,
-    constant_property_scene,
+    constant_properties,
     elastic_target_reason,
+    resolution_for_level,
     target_temperature_range,
 )
 from skidmc.solver.options import (
@@ -188,23 +191,34 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
         from skidmc.solver.fast import fast_critical_height
 
         return fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
+    # The scene's inference, made once: the target's choice below and every model the search
+    # builds take it (ModelBuilder; with the default runaway rule, whose terms decide the
+    # target).
+    builders = []
+
+    def terms_of():
+        builders.append(ModelBuilder(scene, melting=melting, target=target, rtol=rtol))
+        return builders[-1].terms
+
     opts = resolve_options(scene, rtol, h_min=h_min, h_max=h_max, method=method, level=level,
                            extrapolate=extrapolate, melting=melting,
                            runaway_fraction=runaway_fraction, model=model,
-                           melt_width=melt_width, melt_spread=melt_spread, target=target)
+                           melt_width=melt_width, melt_spread=melt_spread, target=target,
+                           terms_of=terms_of if runaway_fraction is None else None)
+    builder = builders[0] if builders else None
     if opts.adaptive:
         # The root finder gets the room the pair is likely not to use; the a posteriori
         # estimate, not the calibrated model, then decides whether it fits (_adaptive_pair).
-        return _adaptive_pair(scene, opts, h_guess, start)
+        return _adaptive_pair(scene, opts, h_guess, start, builder)
     x_tol = root_tolerance(rtol, opts.level, opts.extrapolate, opts.melt_width)
     if not opts.extrapolate:
         return _search(scene, opts, opts.level, x_tol, model=model, h_guess=h_guess,
-                       start=start)
+                       start=start, builder=builder)
     # Richardson: R = H_L + (H_L - H_{L-1}) / 3. Root-finder errors d_L, d_{L-1} enter R as
     # (4 d_L + d_{L-1}) / 3: the cheap coarse search gets the whole root-finder tolerance and
     # the fine one half of it, (4 / 2 + 1) / 3 = 1 tolerance in all.
     return _drive(scene, opts, adaptive.PLAN_PAIR, opts.level, x_tol, 0.5 * x_tol, h_guess,
-                  start)
+                  start, builder=builder)
 
 
 critical_height.__doc__ = _critical_height.__doc__.replace(
@@ -222,7 +236,7 @@ _REGIME_CODES = {"steady": REGIME_STEADY, "fading": REGIME_FADING,
                  "stops_sliding": REGIME_STOPS_SLIDING}
 
 
-def _adaptive_pair(scene, opts, h_guess, start):
+def _adaptive_pair(scene, opts, h_guess, start, builder=None):
     """The default search: a Richardson pair whose own estimate is brought within ``rtol``.
 
     The search is the compiled machine of :mod:`skidmc.solver.adaptive` (the one the device
@@ -237,10 +251,10 @@ def _adaptive_pair(scene, opts, h_guess, start):
     coarse_tol, fine_tol = first_root_tolerances(opts.rtol, opts.level, opts.melt_width,
                                                  opts.melt_spread, opts.exact, opts.signs)
     return _drive(scene, opts, adaptive.PLAN_ADAPTIVE, opts.level, coarse_tol, fine_tol,
-                  h_guess, start)
+                  h_guess, start, builder=builder)
 
 
-def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, start=None):
+def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, start=None, builder=None):
     """One critical-height search at one resolution level, the root to ``x_tol`` [1, in ln H]
     (the fixed plan of a forced level or model without extrapolation; see
     :func:`critical_height`), with the calibrated estimate of its level.
@@ -250,36 +264,47 @@ def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, start=None):
     machine of :mod:`skidmc.solver.adaptive` chooses the root finder, as in every search.
     """
     return _drive(scene, opts, adaptive.PLAN_SINGLE, level, math.nan, x_tol, h_guess,
-                  time.perf_counter() if start is None else start, model=model)
+                  time.perf_counter() if start is None else start, model=model,
+                  builder=builder)
 
 
-def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model=None):
+def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model=None,
+           builder=None):
     """Run the machine of :mod:`skidmc.solver.adaptive` on one scene with ``plan``
     (``PLAN_*``), answering each run it asks for [HeightResult].
 
     Each run is :func:`skidmc.solver.simulate.simulate` on the model of its level and melting
     width (or on ``model`` where one was given), the runs of one search sharing a
-    :class:`LinearPrefix`. ``level`` is the (first) pair's fine level or the single search's;
-    ``coarse_tol``, ``fine_tol`` [1] the root tolerances of the pair's searches (the single
-    search's in ``fine_tol``).
+    :class:`LinearPrefix`; the models come from one :class:`ModelBuilder` of the scene
+    (``builder``, one made with the default runaway rule and the target left open, or made
+    here). ``level`` is the (first) pair's fine level or the single search's; ``coarse_tol``,
+    ``fine_tol`` [1] the root tolerances of the pair's searches (the single search's in
+    ``fine_tol``).
     """
     rtol = opts.rtol
-    kwargs = dict(melting=opts.melting, melt_spread=opts.melt_spread, target=opts.target,
-                  rtol=rtol, **opts.model_kwargs())
     own_model = model is None
+    if own_model and builder is None:
+        builder = ModelBuilder(scene, melting=opts.melting, target=opts.target, rtol=rtol,
+                               **opts.model_kwargs())
     models = {}
+
+    def build(level, width=None, meshes=True):
+        # build_model(scene, level=, melt_width=, meshes=, melting=, melt_spread=, target=,
+        # rtol=, runaway_fraction=) of the search's options, from its one inference
+        return builder.model(resolution_for_level(level, width, opts.melt_spread),
+                             meshes=meshes, target=opts.target)
 
     def model_of(level, width):
         if not own_model:
             return model
         key = (level, width)
         if key not in models:
-            models[key] = build_model(scene, level=level, melt_width=width, **kwargs)
+            models[key] = build(level, width)
         return models[key]
 
     measure_bias = False
     if plan == adaptive.PLAN_ADAPTIVE:
-        probe = build_model(scene, level=level - 1.0, meshes=False, **kwargs)
+        probe = build(level - 1.0, meshes=False)
     else:
         # A fixed plan states the terms and flags of the level it returns.
         probe = model_of(level, opts.melt_width)
@@ -294,9 +319,9 @@ def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model
         # only: the probe's.
         measure_bias = melting_term and probe.ignition_temperature < scene.he_melting_point
     if own_model:
-        regime = _REGIME_CODES[exit_regime(scene)]
+        regime = _REGIME_CODES[opts.regime if opts.regime is not None else exit_regime(scene)]
         fast = None if h_guess is not None else _fast_guess(scene, opts.h_min, opts.h_max,
-                                                            opts.melting)
+                                                            opts.melting, builder)
     else:
         # One model answers every run: how its heating ends, no coarse start, no fast tier.
         regime = (REGIME_STOPS_SLIDING if model.exit_kind == "stops_sliding" else
@@ -341,20 +366,39 @@ def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model
         history=history, wall_time=time.perf_counter() - start)
 
 
-def _fast_guess(scene, h_min, h_max, melting):
-    """The fast tier's critical height [m] as a first guess, or None (censored or failed)."""
-    from skidmc.solver.fast import fast_critical_height
+def _fast_guess(scene, h_min, h_max, melting, builder=None):
+    """The fast tier's critical height [m] as a first guess, or None (censored, refused or
+    failed).
 
+    :func:`skidmc.solver.fast.fast_critical_height`'s height without its model and result: the
+    scene's terms and flags are the search's ``builder``'s (a :class:`ModelBuilder`; made here
+    when not given): the tier's stated error reads the flags self_heating and stops_sliding,
+    which neither the level, the rtol nor the runaway rule changes, and the tier refuses a
+    stack whose heat reaches below its top layer.
+    """
+    from skidmc.solver.fast import SCENE_FIELDS, _scene_values, fast_error_bound, fast_height
+
+    if builder is None:
+        builder = ModelBuilder(scene, melting=melting)
+
+    if "layered_target" in builder.terms:
+        return None
+    values = _scene_values(scene)
     if scene.target_table:
         # The fast tier's target has constant properties: for a guess, those of the table at
-        # the middle of the interface's rise (docs/targets.md).
-        model = build_model(scene, meshes=False, melting=melting)
-        low, high = target_temperature_range(scene.initial_temperature,
-                                             model.runaway_temperature)
-        scene = constant_property_scene(scene, 0.5 * (low + high))
+        # the middle of the interface's rise (docs/targets.md), with the default runaway rule
+        # (constant_property_scene's values, without making the scene).
+        t_run = (builder.runaway_temperature
+                 if builder.runaway_fraction == DEFAULT_RUNAWAY_FRACTION else
+                 build_model(scene, meshes=False, melting=melting).runaway_temperature)
+        low, high = target_temperature_range(scene.initial_temperature, t_run)
+        values = list(values)
+        (values[SCENE_FIELDS.index("target_conductivity")],
+         values[SCENE_FIELDS.index("target_heat_capacity")]) = constant_properties(
+            scene, 0.5 * (low + high))
     try:
-        res = fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
+        h, censored, _, _ = fast_height(values, fast_error_bound(builder.flags), h_min, h_max,
+                                        melting=melting)
     except Exception:  # noqa: BLE001 - only a guess: the full search does not need it
         return None
-    h = res.critical_height
-    return h if res.censored is None and math.isfinite(h) else None
+    return h if censored is None and math.isfinite(h) else None
