@@ -54,10 +54,10 @@ from skidmc.solver.results import HeightResult
 __all__ = [
     "REFUSED_FLAGS",
     "SCENE_FIELDS",
-    "fast_height",
     "fast_critical_height",
     "fast_critical_heights",
     "fast_error_bound",
+    "fast_height",
     "scene_columns",
     "theta_history",
 ]

@@ -191,13 +191,13 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
         from skidmc.solver.fast import fast_critical_height
 
         return fast_critical_height(scene, h_min=h_min, h_max=h_max, melting=melting)
-    # The scene's inference, made once: the target's choice below and every model the search
-    # builds take it (ModelBuilder; with the default runaway rule, whose terms decide the
-    # target).
+    # The scene's inference, made once where the options choose the target (with the default
+    # runaway rule, the one whose terms decide it; the target left to each model): that choice
+    # and every model the search builds take it (ModelBuilder).
     builders = []
 
     def terms_of():
-        builders.append(ModelBuilder(scene, melting=melting, target=target, rtol=rtol))
+        builders.append(ModelBuilder(scene, melting=melting, target=None, rtol=rtol))
         return builders[-1].terms
 
     opts = resolve_options(scene, rtol, h_min=h_min, h_max=h_max, method=method, level=level,
