@@ -237,6 +237,46 @@ def test_recorder_replays_and_forgets_a_diverging_tail(tmp_path):
     assert again.computed == 1 and len(list(log.folder.glob("*.h5"))) == 2
 
 
+def test_a_log_names_its_blas_kernels_and_a_replay_elsewhere_says_so(tmp_path):
+    # A replay compares each call's inputs to the last bit, and the estimator's numbers go
+    # through BLAS: a log records the kernels it was computed with, and a replay that fails
+    # where they differ names both (the shipped hazard logs: SkylakeX, against an AMD EPYC's
+    # Haswell).
+    import h5py
+
+    from skidmc.ensemble.storage import EvaluationLog, StorageError, blas_kernels
+    from skidmc.scene import get_preset
+    from skidmc.workflows.replay import RecordedSolver
+
+    here = blas_kernels()
+    assert here.startswith(("openblas ", "mkl ", "blis ", "flexiblas "))
+    base = get_preset("paper-quartz")
+    log = EvaluationLog(tmp_path / "e.h5", {"study_sha256": "x"})
+    log.start(keep=False)
+
+    def solver(columns, options, **kwargs):
+        mu = columns["mu"]
+        return types.SimpleNamespace(critical_height=1.0 / mu, status=["ok"] * mu.size,
+                                     failure_reason=[""] * mu.size)
+
+    rec = RecordedSolver(solver, log, False)
+    rec({"mu": np.array([0.1, 0.2])}, "opts", base=base)
+    log.complete(rec.calls)
+    assert log.info()["blas"] == here
+    with h5py.File(log.path, "r+") as f:
+        f.attrs["blas"] = "openblas Elsewhere"
+    replay = RecordedSolver(solver, log, True)
+    with pytest.raises(StorageError, match="BLAS kernels are openblas Elsewhere, this "
+                       f"machine's {here}"):
+        replay({"mu": np.array([0.1, 0.2 + 1e-16])}, "opts", base=base)
+    # Where the kernels are the same, the refusal does not blame them.
+    with h5py.File(log.path, "r+") as f:
+        f.attrs["blas"] = here
+    with pytest.raises(StorageError) as same:
+        RecordedSolver(solver, log, True)({"mu": np.array([0.3])}, "opts", base=base)
+    assert "BLAS" not in str(same.value)
+
+
 # --- the growing Sobol' kind: resume with the numbers of an uninterrupted run ---------------------
 
 _CALLS = {"n": 0, "stop_at": -1}

@@ -1190,6 +1190,19 @@ def library_versions() -> str:
     return f"numpy {np.__version__}, scipy {scipy.__version__}"
 
 
+def blas_kernels() -> str:
+    """``"openblas Haswell"``: the BLAS libraries numpy and scipy run on and the kernels each
+    chose for this CPU (threadpoolctl). A replayed log's inputs depend on them to the last bit
+    as on the library versions: the hazard study's shipped log, computed with OpenBLAS's
+    SkylakeX kernels, replays with them and not with the Haswell kernels OpenBLAS takes on an
+    AMD EPYC (docs/rare-events.md). "" where no BLAS library is found."""
+    import scipy.linalg  # noqa: F401 - scipy's BLAS, loaded as the estimators load it
+    from threadpoolctl import threadpool_info
+
+    return ", ".join(sorted({f"{d.get('internal_api', '?')} {d.get('architecture') or '?'}"
+                             for d in threadpool_info() if d.get("user_api") == "blas"}))
+
+
 class EvaluationLog:
     """The solver calls of an adaptive study, kept so that a run resumes and a report replays.
 
@@ -1236,6 +1249,7 @@ class EvaluationLog:
                         "study_sha256": str(f.attrs.get("study_sha256", "")),
                         "study_file": str(f.attrs.get("study_file", "")),
                         "libraries": str(f.attrs.get("libraries", "")),
+                        "blas": str(f.attrs.get("blas", "")),
                         "calls": int(f["digest"].shape[0]) if "digest" in f else 0}
         calls = sorted(self.folder.glob("*.h5")) if self.folder.is_dir() else []
         return {"exists": bool(calls), "complete": False,
@@ -1344,7 +1358,7 @@ class EvaluationLog:
             f.attrs.update({"skidmc_format": EVALUATIONS_FORMAT,
                             "skidmc_version": _version(), "complete": np.int8(1),
                             "completed": timestamp(), "libraries": library_versions(),
-                            **self.attrs})
+                            "blas": blas_kernels(), **self.attrs})
             f.create_dataset("call", data=call, **kw)
             f.create_dataset("critical_height", data=heights, **kw).attrs["units"] = "m"
             f.create_dataset("status", data=codes, **kw).attrs.update(Status.flag_attrs())

@@ -54,12 +54,16 @@ class RecordedSolver:
             call = self.kept[i]
         else:
             if self.replay_only:
-                from skidmc.ensemble.storage import library_versions
+                from skidmc.ensemble.storage import blas_kernels, library_versions
 
-                logged = self.log.info().get("libraries", "")
-                here = library_versions()
+                info = self.log.info()
+                logged, here = info.get("libraries", ""), library_versions()
+                logged_blas, here_blas = info.get("blas", ""), blas_kernels()
                 why = (f"; the log was computed with {logged}, this machine has {here}, and a "
                        "call's inputs are compared to the last bit" if logged and logged != here
+                       else f"; the log's BLAS kernels are {logged_blas or 'not recorded'}, "
+                       f"this machine's {here_blas}, and a call's inputs are compared to the "
+                       "last bit: another CPU's kernels move them" if logged_blas != here_blas
                        else "")
                 raise StorageError(self.log.path, f"holds {len(self.kept)} solver calls that "
                                    f"do not cover this study's estimate (call {i} differs or "
