@@ -68,9 +68,9 @@ def evaluate_batch(scenes, solver_options: SolverOptions | Mapping | None = None
         ``"threads"``: `workers` threads of this process instead of worker processes (no
         worker to start; the same results; but a crash in one sample ends the process:
         :class:`~skidmc.ensemble.executors.ThreadExecutor`; 300 heights at rtol 1e-3 on 2
-        threads ran at 76 % of twice the in-process rate, a warm pool at 96 %:
-        docs/performance.md). ``"dask"`` or a dask Client/address instead of local processes
-        (as in :func:`run_study`).
+        threads ran at 84 % of twice the in-process rate, a warm pool at 94 %:
+        results/benchmarks/batch_overhead.md). ``"dask"`` or a dask Client/address instead of
+        local processes (as in :func:`run_study`).
     solver : callable, optional
         Used instead of :func:`skidmc.solver.critical_height` (default), called as
         ``solver(scene, **solver_options)`` and returning an object with ``critical_height``,
