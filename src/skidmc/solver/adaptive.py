@@ -803,6 +803,15 @@ def _finish(s, res):
 
 
 @njit(cache=True)
+def finish_at_level_cap(ps, res):
+    """The outcome of a default search stopped by its caller's cap on the level
+    (``max_level`` of :func:`pair_start`, where the machine handed its scene back with
+    :data:`BACK_LEVEL`): the last pair's value and a posteriori estimate, as the round that
+    would have refined found them (above rtol: the caller flags it). Returns (FINISHED, NaN)."""
+    return _finish(ps[0], res)
+
+
+@njit(cache=True)
 def asked(ps):
     """The run the machine asked for, for a Python caller: (level, melting width [K],
     until_exit, alone (no linear prefix), the search's serial)."""

@@ -27,12 +27,14 @@ from skidmc.scene.scenes import Scene
 from skidmc.solver import adaptive
 from skidmc.solver.adaptive import (
     ASK_RUN,
+    BACK_LEVEL,
     COARSE_GAP,
     FADING_FAST_SHIFT,
     FADING_FAST_SPREAD,
     FAST_STOPS_SLIDING_SPREAD,
     FINE_SHIFT_SPREAD,
     FINISHED,
+    HAND_BACK,
     MELT_SHIFT_FACTOR,
     P_M,
     P_X,
@@ -111,7 +113,7 @@ def critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DE
 def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=DEFAULT_H_MAX,
                     *, method="brent", level=None, extrapolate=None, melting=True,
                     runaway_fraction=None, h_guess=None, model=None, melt_width=None,
-                    melt_spread=None, target=None):
+                    melt_spread=None, target=None, max_level=None):
     """Critical drop height of a scene [m].
 
     Parameters
@@ -164,6 +166,14 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
         target as an exact semi-infinite solid"); "mesh" (the target on its own mesh, what the
         calibrated level model was fitted on) when ``level``, ``model`` or
         ``extrapolate=False`` fixes the plan. Ignored with ``model``.
+    max_level : float, optional
+        The finest level the default search may refine its Richardson pair to (the pair's
+        finer level; default: as far as it needs, up to
+        :data:`skidmc.solver.plan.MAX_ADAPTIVE_LEVEL`). Where the pair would have to move above
+        it, the search ends with the last pair's value and its estimate, above ``rtol`` and
+        flagged ``"rtol_unmet"``: speed bought with accuracy, stated per height
+        (docs/performance.md, "A cap on refinement"). At least the first pair's fine level of
+        ``rtol``; only for the default search.
 
     Returns
     -------
@@ -206,10 +216,20 @@ def _critical_height(scene, rtol=1e-3, tier="full", h_min=DEFAULT_H_MIN, h_max=D
                            melt_width=melt_width, melt_spread=melt_spread, target=target,
                            terms_of=terms_of if runaway_fraction is None else None)
     builder = builders[0] if builders else None
+    if max_level is not None:
+        if isinstance(max_level, bool) or not isinstance(max_level, numbers.Real):
+            raise SceneError("max_level", max_level, "must be a number (a refinement level)")
+        if not opts.adaptive:
+            raise SceneError("max_level", max_level, "caps the default search's refinement: "
+                             "not with a forced level, a given model or extrapolate=False")
+        if not max_level >= opts.level:
+            raise SceneError("max_level", max_level, f"below the first pair's fine level "
+                             f"{opts.level:g} at rtol = {rtol:g}")
     if opts.adaptive:
         # The root finder gets the room the pair is likely not to use; the a posteriori
         # estimate, not the calibrated model, then decides whether it fits (_adaptive_pair).
-        return _adaptive_pair(scene, opts, h_guess, start, builder)
+        return _adaptive_pair(scene, opts, h_guess, start, builder,
+                              math.inf if max_level is None else float(max_level))
     x_tol = root_tolerance(rtol, opts.level, opts.extrapolate, opts.melt_width)
     if not opts.extrapolate:
         return _search(scene, opts, opts.level, x_tol, model=model, h_guess=h_guess,
@@ -236,7 +256,7 @@ _REGIME_CODES = {"steady": REGIME_STEADY, "fading": REGIME_FADING,
                  "stops_sliding": REGIME_STOPS_SLIDING}
 
 
-def _adaptive_pair(scene, opts, h_guess, start, builder=None):
+def _adaptive_pair(scene, opts, h_guess, start, builder=None, max_level=math.inf):
     """The default search: a Richardson pair whose own estimate is brought within ``rtol``.
 
     The search is the compiled machine of :mod:`skidmc.solver.adaptive` (the one the device
@@ -251,7 +271,7 @@ def _adaptive_pair(scene, opts, h_guess, start, builder=None):
     coarse_tol, fine_tol = first_root_tolerances(opts.rtol, opts.level, opts.melt_width,
                                                  opts.melt_spread, opts.exact, opts.signs)
     return _drive(scene, opts, adaptive.PLAN_ADAPTIVE, opts.level, coarse_tol, fine_tol,
-                  h_guess, start, builder=builder)
+                  h_guess, start, builder=builder, max_level=max_level)
 
 
 def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, start=None, builder=None):
@@ -269,7 +289,7 @@ def _search(scene, opts, level, x_tol, *, model=None, h_guess=None, start=None, 
 
 
 def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model=None,
-           builder=None):
+           builder=None, max_level=math.inf):
     """Run the machine of :mod:`skidmc.solver.adaptive` on one scene with ``plan``
     (``PLAN_*``), answering each run it asks for [HeightResult].
 
@@ -279,7 +299,8 @@ def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model
     (``builder``, one made with the default runaway rule and the target left open, or made
     here). ``level`` is the (first) pair's fine level or the single search's; ``coarse_tol``,
     ``fine_tol`` [1] the root tolerances of the pair's searches (the single search's in
-    ``fine_tol``).
+    ``fine_tol``); ``max_level``: the default search's cap on its pair's level (the last pair's
+    outcome where it would refine beyond it).
     """
     rtol = opts.rtol
     own_model = model is None
@@ -332,7 +353,7 @@ def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model
         ps, res, pts, st, fpts, rtol, opts.h_min, opts.h_max, level,
         opts.melt_width if own_model else model.resolution.melt_width, coarse_tol, fine_tol,
         opts.melt_spread, opts.exact, opts.signs, regime, melting_term, measure_bias, True,
-        math.inf, "no_friction" in probe.flags, math.nan if fast is None else fast,
+        max_level, "no_friction" in probe.flags, math.nan if fast is None else fast,
         math.nan if h_guess is None else float(h_guess),
         math.log(probe.end_time / probe.exit_time), opts.method == "bisection", plan,
         own_model)
@@ -345,6 +366,9 @@ def _drive(scene, opts, plan, level, coarse_tol, fine_tol, h_guess, start, model
         sim = simulate(run_model, math.exp(x), until_exit=until_exit,
                        prefix=None if alone else prefix)
         code, x = adaptive.pair_step(ps, res, pts, st, fpts, sim.margin, sim.event)
+    if code == HAND_BACK and int(ps[0]["reason"]) == BACK_LEVEL:
+        # The caller's cap on the level (max_level): the last pair's outcome.
+        code, x = adaptive.finish_at_level_cap(ps, res)
     if code != FINISHED:   # pragma: no cover - a CPU run raises instead of failing quietly
         raise SolverError(f"the search ended without a root (reason {int(ps[0]['reason'])})")
     (height, censor, estimate, level, extrapolated, correction, melt_bias,
