@@ -213,20 +213,28 @@ def test_damaged_evaluation_log_is_refused_naming_it(tmp_path, capsys):
     assert "damaged" in capsys.readouterr().err
 
 
-def test_recorder_replays_and_forgets_a_diverging_tail(tmp_path):
+def _mu_solver(columns, options, **kwargs):
+    """A stand-in solver of evaluate_batch's signature: H = 1 / mu."""
+    mu = columns["mu"]
+    return types.SimpleNamespace(critical_height=1.0 / mu, status=["ok"] * mu.size,
+                                 failure_reason=[""] * mu.size)
+
+
+def _new_log(tmp_path):
+    """An empty evaluation log and the base scene of its calls."""
     from skidmc.ensemble.storage import EvaluationLog
     from skidmc.scene import get_preset
-    from skidmc.workflows.replay import RecordedSolver
 
-    base = get_preset("paper-quartz")
     log = EvaluationLog(tmp_path / "e.h5", {"study_sha256": "x"})
     log.start(keep=False)
+    return log, get_preset("paper-quartz")
 
-    def solver(columns, options, **kwargs):
-        mu = columns["mu"]
-        return types.SimpleNamespace(critical_height=1.0 / mu, status=["ok"] * mu.size,
-                                     failure_reason=[""] * mu.size)
 
+def test_recorder_replays_and_forgets_a_diverging_tail(tmp_path):
+    from skidmc.workflows.replay import RecordedSolver
+
+    log, base = _new_log(tmp_path)
+    solver = _mu_solver
     rec = RecordedSolver(solver, log, False)
     for k in range(3):
         rec({"mu": np.array([0.1, 0.2]) + k}, "opts", base=base)
@@ -244,21 +252,13 @@ def test_a_log_names_its_blas_kernels_and_a_replay_elsewhere_says_so(tmp_path):
     # Haswell).
     import h5py
 
-    from skidmc.ensemble.storage import EvaluationLog, StorageError, blas_kernels
-    from skidmc.scene import get_preset
+    from skidmc.ensemble.storage import StorageError, blas_kernels
     from skidmc.workflows.replay import RecordedSolver
 
     here = blas_kernels()
     assert here.startswith(("openblas ", "mkl ", "blis ", "flexiblas "))
-    base = get_preset("paper-quartz")
-    log = EvaluationLog(tmp_path / "e.h5", {"study_sha256": "x"})
-    log.start(keep=False)
-
-    def solver(columns, options, **kwargs):
-        mu = columns["mu"]
-        return types.SimpleNamespace(critical_height=1.0 / mu, status=["ok"] * mu.size,
-                                     failure_reason=[""] * mu.size)
-
+    log, base = _new_log(tmp_path)
+    solver = _mu_solver
     rec = RecordedSolver(solver, log, False)
     rec({"mu": np.array([0.1, 0.2])}, "opts", base=base)
     log.complete(rec.calls)
